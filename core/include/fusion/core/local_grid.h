@@ -1,0 +1,132 @@
+// Rendering a sensor's beam grid into a local Cartesian grid (paper Sec. IV: "cell occupancy
+// probabilities are computed using (8) and written to a local occupancy grid using
+// ray-tracing, keeping in mind the relative offsets of the sensors").
+//
+// The local grid is keyed by OctoMap keys of the world-frame map at the same resolution, so a
+// rendered grid fuses into the world octree voxel by voxel without resampling.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <octomap/OcTreeKey.h>
+
+#include "fusion/core/beam_grid.h"
+
+namespace fusion {
+
+// How the opinions of several beam segments that cross one voxel become one probability.
+// Each segment contributes its evidence e = logit(p_segment) - logit(prior(segment length)),
+// i.e. log-odds relative to what an untouched beam reports, weighted by its crossing length.
+enum class VoxelCombine {
+  // Length-weighted mean of the segments' evidence (default; see docs/mapping.md).
+  kWeightedMeanLogOdds,
+  // The segment with the largest evidence wins (obstacle-conservative).
+  kMaxLogOdds,
+  // Sum of the segments' evidence (treats overlapping beams as independent observations).
+  kIndependentPool,
+};
+
+struct RenderOptions {
+  static constexpr double kDefaultTailMass = 1e-4;
+  static constexpr int kDefaultMaxSubraysPerAxis = 3;
+  static constexpr double kDefaultMaxAbsLogOdds = 12.0;
+
+  double resolution_m = 0.02;
+  VoxelCombine combine = VoxelCombine::kWeightedMeanLogOdds;
+  // A ray stops after the voxel where the remaining first-hit mass S (relative to where the
+  // rendering started) falls below this: everything behind carries no information.
+  double tail_mass = kDefaultTailMass;
+  // A beam wider than a voxel at the range where its evidence ends is traced with k x k
+  // sub-rays spread over its spherical sector, k = ceil(width * range / resolution) <= this.
+  int max_subrays_per_axis = kDefaultMaxSubraysPerAxis;
+  // Rays are traced no further than this (metres from the sensor origin).
+  double max_range_m = 1e9;
+  // Each segment's evidence is clamped to +-this (natural log-odds).
+  double max_abs_log_odds = kDefaultMaxAbsLogOdds;
+};
+
+struct RenderStats {
+  std::size_t beams_rendered = 0;
+  std::size_t beams_untouched = 0;  // skipped: no reading, no information
+  std::size_t rays_traced = 0;
+  std::size_t segments = 0;  // voxel crossings with evidence
+  std::size_t voxels = 0;    // distinct voxels in the local grid
+};
+
+// World-frame voxel key of a point at the given resolution; identical to
+// octomap::OcTree(resolution_m).coordToKey(p) (tree depth 16).
+[[nodiscard]] octomap::OcTreeKey KeyOfPoint(const Eigen::Vector3d& p_world, double resolution_m);
+// Centre of a voxel, world frame, metres.
+[[nodiscard]] Eigen::Vector3d KeyCenter(const octomap::OcTreeKey& key, double resolution_m);
+
+// A sparse grid of voxel evidence (open addressing hash table keyed by packed OcTreeKey).
+class LocalGrid {
+ public:
+  explicit LocalGrid(double resolution_m,
+                     VoxelCombine combine = VoxelCombine::kWeightedMeanLogOdds);
+
+  [[nodiscard]] double resolution_m() const { return resolution_m_; }
+  [[nodiscard]] VoxelCombine combine() const { return combine_; }
+  [[nodiscard]] std::size_t size() const { return size_; }
+  [[nodiscard]] bool empty() const { return size_ == 0; }
+
+  // Adds one segment's evidence (log-odds relative to the prior) with a weight (> 0).
+  void AddEvidence(const octomap::OcTreeKey& key, double log_odds_evidence, double weight);
+  // Combined occupancy probability of a voxel; std::nullopt if no segment touched it.
+  [[nodiscard]] std::optional<double> Probability(const octomap::OcTreeKey& key) const;
+  [[nodiscard]] std::optional<double> LogOddsOf(const octomap::OcTreeKey& key) const;
+  // Every voxel with its combined log-odds (unordered).
+  [[nodiscard]] std::vector<std::pair<octomap::OcTreeKey, float>> LogOddsVoxels() const;
+  template <typename F>
+  void ForEachLogOdds(F&& f) const {
+    for (const Entry& e : entries_) {
+      if (e.packed != kEmpty) f(Unpack(e.packed), CombinedLogOdds(e));
+    }
+  }
+  void Clear();
+  [[nodiscard]] std::size_t MemoryBytes() const { return entries_.capacity() * sizeof(Entry); }
+
+ private:
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};
+  struct Entry {
+    std::uint64_t packed = kEmpty;
+    float sum_weighted = 0.0f;  // sum of w * e
+    float sum_weight = 0.0f;    // sum of w
+    float sum = 0.0f;           // sum of e
+    float max = 0.0f;           // max of e
+  };
+  static std::uint64_t Pack(const octomap::OcTreeKey& key) {
+    return std::uint64_t{key.k[0]} | (std::uint64_t{key.k[1]} << 16) |
+           (std::uint64_t{key.k[2]} << 32);
+  }
+  static octomap::OcTreeKey Unpack(std::uint64_t packed) {
+    return octomap::OcTreeKey(static_cast<octomap::key_type>(packed & 0xffff),
+                              static_cast<octomap::key_type>((packed >> 16) & 0xffff),
+                              static_cast<octomap::key_type>((packed >> 32) & 0xffff));
+  }
+  [[nodiscard]] float CombinedLogOdds(const Entry& e) const;
+  [[nodiscard]] const Entry* Find(std::uint64_t packed) const;
+  void Grow();
+
+  double resolution_m_;
+  VoxelCombine combine_;
+  std::vector<Entry> entries_;
+  std::size_t size_ = 0;
+  std::size_t mask_ = 0;
+};
+
+// Ray-traces every touched beam of the grid from the sensor pose T_world_sensor (sensor
+// optical frame -> world, mount offsets included) into a local grid at options.resolution_m.
+// Each voxel a ray crosses between r_min and the point where the beam's evidence is exhausted
+// gets the beam's interval occupancy over exactly its crossing interval (BeamGrid::
+// IntervalOccupancy), so beam cells finer than a voxel are aggregated exactly. Voxels crossed
+// by no touched beam, cells below r_min and voxels behind surfaces are left out (unknown).
+[[nodiscard]] LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                                       const RenderOptions& options, RenderStats* stats = nullptr);
+
+}  // namespace fusion

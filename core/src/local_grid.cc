@@ -1,0 +1,302 @@
+#include "fusion/core/local_grid.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace fusion {
+namespace {
+
+constexpr int kTreeMaxVal = 32768;  // octomap tree_max_val for depth 16
+constexpr std::size_t kChunkSegments = 96;
+constexpr double kProbabilityFloor = 1e-9;
+
+double Logit(double p) {
+  p = std::clamp(p, kProbabilityFloor, 1.0 - kProbabilityFloor);
+  return std::log(p / (1.0 - p));
+}
+
+std::uint64_t HashPacked(std::uint64_t packed) {
+  return packed * 0x9E3779B97F4A7C15ull;
+}
+
+// One voxel crossing of a ray with its evidence.
+struct Segment {
+  octomap::OcTreeKey key;
+  float evidence;
+  float weight;
+};
+
+// Prior log-odds of an interval of n beam cells, cached by n.
+class PriorCache {
+ public:
+  PriorCache(const BeamGrid& grid) : grid_(grid), cell_m_(grid.options().cell_size_m) {}
+  double LogOddsOfCells(long n) {
+    if (n < 0) n = 0;
+    const auto index = static_cast<std::size_t>(n);
+    if (index >= cache_.size()) {
+      cache_.resize(index + 1, std::numeric_limits<double>::quiet_NaN());
+    }
+    double& v = cache_[index];
+    if (std::isnan(v)) v = Logit(grid_.PriorOccupancy(static_cast<double>(n) * cell_m_));
+    return v;
+  }
+
+ private:
+  const BeamGrid& grid_;
+  double cell_m_;
+  std::vector<double> cache_;
+};
+
+// Traces one ray of one beam (Amanatides & Woo voxel traversal) and appends its segments.
+// Returns the range at which the trace stopped.
+class RayTracer {
+ public:
+  RayTracer(const BeamGrid& grid, const RenderOptions& options)
+      : grid_(grid),
+        options_(options),
+        prior_(grid),
+        cell_m_(grid.options().cell_size_m),
+        inv_res_(1.0 / options.resolution_m) {
+    boundaries_.reserve(kChunkSegments + 1);
+    keys_.reserve(kChunkSegments);
+  }
+
+  double Trace(std::size_t beam, const Eigen::Vector3d& origin, const Eigen::Vector3d& dir,
+               double t_start, double t_end, float weight_scale, std::vector<Segment>* out) {
+    if (!(t_end > t_start)) return t_start;
+    const double res = options_.resolution_m;
+    const Eigen::Vector3d p0 = origin + dir * t_start;
+    long index[3];
+    int step[3];
+    double t_max[3];
+    double t_delta[3];
+    for (int a = 0; a < 3; ++a) {
+      index[a] = static_cast<long>(std::floor(p0[a] * inv_res_));
+      if (dir[a] > 0.0) {
+        step[a] = 1;
+        t_max[a] = t_start + ((index[a] + 1) * res - p0[a]) / dir[a];
+        t_delta[a] = res / dir[a];
+      } else if (dir[a] < 0.0) {
+        step[a] = -1;
+        t_max[a] = t_start + (index[a] * res - p0[a]) / dir[a];
+        t_delta[a] = -res / dir[a];
+      } else {
+        step[a] = 0;
+        t_max[a] = std::numeric_limits<double>::infinity();
+        t_delta[a] = std::numeric_limits<double>::infinity();
+      }
+    }
+    double remaining_mass = 1.0;
+    double t_in = t_start;
+    bool done = false;
+    while (!done) {
+      boundaries_.clear();
+      keys_.clear();
+      boundaries_.push_back(t_in);
+      while (keys_.size() < kChunkSegments && t_in < t_end) {
+        const int axis = (t_max[0] < t_max[1]) ? (t_max[0] < t_max[2] ? 0 : 2)
+                                               : (t_max[1] < t_max[2] ? 1 : 2);
+        const double t_out = std::min(t_max[axis], t_end);
+        keys_.emplace_back(static_cast<octomap::key_type>(index[0] + kTreeMaxVal),
+                           static_cast<octomap::key_type>(index[1] + kTreeMaxVal),
+                           static_cast<octomap::key_type>(index[2] + kTreeMaxVal));
+        boundaries_.push_back(t_out);
+        t_in = t_out;
+        index[axis] += step[axis];
+        t_max[axis] += t_delta[axis];
+      }
+      if (keys_.empty()) break;
+      grid_.IntervalOccupancy(beam, boundaries_, &occupancy_);
+      for (std::size_t j = 0; j < keys_.size(); ++j) {
+        const long c0 = std::lround(boundaries_[j] / cell_m_);
+        const long c1 = std::lround(boundaries_[j + 1] / cell_m_);
+        if (c1 <= c0) continue;  // shorter than a beam cell: no evidence of its own
+        const double p = j < occupancy_.size() ? occupancy_[j] : 0.5;
+        double evidence = Logit(p) - prior_.LogOddsOfCells(c1 - c0);
+        evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);
+        const double length_m = boundaries_[j + 1] - boundaries_[j];
+        out->push_back({keys_[j], static_cast<float>(evidence),
+                        static_cast<float>(length_m) * weight_scale});
+        remaining_mass *= (1.0 - p);
+        if (remaining_mass < options_.tail_mass) {
+          done = true;
+          t_in = boundaries_[j + 1];
+          break;
+        }
+      }
+      if (t_in >= t_end) done = true;
+    }
+    return t_in;
+  }
+
+ private:
+  const BeamGrid& grid_;
+  const RenderOptions& options_;
+  PriorCache prior_;
+  double cell_m_;
+  double inv_res_;
+  std::vector<double> boundaries_;
+  std::vector<octomap::OcTreeKey> keys_;
+  std::vector<double> occupancy_;
+};
+
+}  // namespace
+
+octomap::OcTreeKey KeyOfPoint(const Eigen::Vector3d& p_world, double resolution_m) {
+  const double inv = 1.0 / resolution_m;
+  return octomap::OcTreeKey(
+      static_cast<octomap::key_type>(static_cast<int>(std::floor(inv * p_world.x())) + kTreeMaxVal),
+      static_cast<octomap::key_type>(static_cast<int>(std::floor(inv * p_world.y())) + kTreeMaxVal),
+      static_cast<octomap::key_type>(static_cast<int>(std::floor(inv * p_world.z())) + kTreeMaxVal));
+}
+
+Eigen::Vector3d KeyCenter(const octomap::OcTreeKey& key, double resolution_m) {
+  return Eigen::Vector3d((static_cast<int>(key.k[0]) - kTreeMaxVal + 0.5) * resolution_m,
+                         (static_cast<int>(key.k[1]) - kTreeMaxVal + 0.5) * resolution_m,
+                         (static_cast<int>(key.k[2]) - kTreeMaxVal + 0.5) * resolution_m);
+}
+
+LocalGrid::LocalGrid(double resolution_m, VoxelCombine combine)
+    : resolution_m_(resolution_m), combine_(combine) {
+  entries_.resize(1024);
+  mask_ = entries_.size() - 1;
+}
+
+void LocalGrid::Clear() {
+  std::fill(entries_.begin(), entries_.end(), Entry{});
+  size_ = 0;
+}
+
+void LocalGrid::Grow() {
+  std::vector<Entry> old;
+  old.swap(entries_);
+  entries_.assign(old.size() * 2, Entry{});
+  mask_ = entries_.size() - 1;
+  for (const Entry& e : old) {
+    if (e.packed == kEmpty) continue;
+    std::size_t i = HashPacked(e.packed) & mask_;
+    while (entries_[i].packed != kEmpty) i = (i + 1) & mask_;
+    entries_[i] = e;
+  }
+}
+
+void LocalGrid::AddEvidence(const octomap::OcTreeKey& key, double log_odds_evidence,
+                            double weight) {
+  if (2 * (size_ + 1) > entries_.size()) Grow();
+  const std::uint64_t packed = Pack(key);
+  std::size_t i = HashPacked(packed) & mask_;
+  while (entries_[i].packed != packed && entries_[i].packed != kEmpty) i = (i + 1) & mask_;
+  Entry& e = entries_[i];
+  const auto evidence = static_cast<float>(log_odds_evidence);
+  const auto w = static_cast<float>(weight);
+  if (e.packed == kEmpty) {
+    e.packed = packed;
+    e.max = evidence;
+    ++size_;
+  } else {
+    e.max = std::max(e.max, evidence);
+  }
+  e.sum_weighted += w * evidence;
+  e.sum_weight += w;
+  e.sum += evidence;
+}
+
+const LocalGrid::Entry* LocalGrid::Find(std::uint64_t packed) const {
+  std::size_t i = HashPacked(packed) & mask_;
+  while (entries_[i].packed != kEmpty) {
+    if (entries_[i].packed == packed) return &entries_[i];
+    i = (i + 1) & mask_;
+  }
+  return nullptr;
+}
+
+float LocalGrid::CombinedLogOdds(const Entry& e) const {
+  switch (combine_) {
+    case VoxelCombine::kWeightedMeanLogOdds:
+      return e.sum_weight > 0.0f ? e.sum_weighted / e.sum_weight : 0.0f;
+    case VoxelCombine::kMaxLogOdds:
+      return e.max;
+    case VoxelCombine::kIndependentPool:
+      return e.sum;
+  }
+  return 0.0f;
+}
+
+std::optional<double> LocalGrid::LogOddsOf(const octomap::OcTreeKey& key) const {
+  const Entry* e = Find(Pack(key));
+  if (e == nullptr) return std::nullopt;
+  return CombinedLogOdds(*e);
+}
+
+std::optional<double> LocalGrid::Probability(const octomap::OcTreeKey& key) const {
+  const auto l = LogOddsOf(key);
+  if (!l) return std::nullopt;
+  return 1.0 / (1.0 + std::exp(-*l));
+}
+
+std::vector<std::pair<octomap::OcTreeKey, float>> LocalGrid::LogOddsVoxels() const {
+  std::vector<std::pair<octomap::OcTreeKey, float>> out;
+  out.reserve(size_);
+  ForEachLogOdds([&out](const octomap::OcTreeKey& k, float l) { out.emplace_back(k, l); });
+  return out;
+}
+
+LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                         const RenderOptions& options, RenderStats* stats) {
+  LocalGrid local(options.resolution_m, options.combine);
+  RenderStats s;
+  const SensorSpec& spec = grid.spec();
+  const BeamTessellation& tess = grid.tessellation();
+  const double beam_length_m =
+      static_cast<double>(grid.cells_per_beam()) * grid.options().cell_size_m;
+  const double t_start = std::max(0.0, spec.r_min_m);
+  const double t_end = std::min(beam_length_m, options.max_range_m);
+  const double width_rad = std::max(tess.beam_width_h_rad(), tess.beam_width_v_rad());
+  const Eigen::Matrix3d R = T_world_sensor.linear();
+  const Eigen::Vector3d origin = T_world_sensor.translation();
+
+  RayTracer tracer(grid, options);
+  std::vector<Segment> segments;
+  segments.reserve(512);
+  const std::size_t beam_count = tess.beam_count();
+  for (std::size_t b = 0; b < beam_count; ++b) {
+    if (!grid.Touched(b)) {
+      ++s.beams_untouched;
+      continue;
+    }
+    ++s.beams_rendered;
+    segments.clear();
+    const Eigen::Vector3d dir_sensor = tess.Direction(b);
+    const double t_stop =
+        tracer.Trace(b, origin, R * dir_sensor, t_start, t_end, 1.0f, &segments);
+    ++s.rays_traced;
+    const int k = std::clamp(static_cast<int>(std::ceil(width_rad * t_stop / options.resolution_m)),
+                             1, std::max(1, options.max_subrays_per_axis));
+    if (k > 1) {
+      // The beam's footprint at the end of its evidence is wider than a voxel: spread k x k
+      // sub-rays uniformly over its azimuth x elevation sector, each with weight 1 / k^2.
+      segments.clear();
+      const double az = std::atan2(dir_sensor.x(), dir_sensor.z());
+      const double el = std::atan2(-dir_sensor.y(), std::hypot(dir_sensor.x(), dir_sensor.z()));
+      const float weight = 1.0f / static_cast<float>(k * k);
+      for (int i = 0; i < k; ++i) {
+        const double sub_az = az + ((i + 0.5) / k - 0.5) * tess.beam_width_h_rad();
+        for (int j = 0; j < k; ++j) {
+          const double sub_el = el + ((j + 0.5) / k - 0.5) * tess.beam_width_v_rad();
+          const Eigen::Vector3d d(std::cos(sub_el) * std::sin(sub_az), -std::sin(sub_el),
+                                  std::cos(sub_el) * std::cos(sub_az));
+          tracer.Trace(b, origin, R * d, t_start, t_end, weight, &segments);
+          ++s.rays_traced;
+        }
+      }
+    }
+    s.segments += segments.size();
+    for (const Segment& seg : segments) local.AddEvidence(seg.key, seg.evidence, seg.weight);
+  }
+  s.voxels = local.size();
+  if (stats != nullptr) *stats = s;
+  return local;
+}
+
+}  // namespace fusion

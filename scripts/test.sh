@@ -1,0 +1,12 @@
+#!/usr/bin/env bash
+# Builds and runs the whole test suite (unit + integration) with ctest.
+#   scripts/test.sh             everything
+#   scripts/test.sh -L unit     only one label (any ctest arguments pass through)
+set -euo pipefail
+source "$(dirname "$0")/common.sh"
+
+ensure_packages
+build
+log "running tests"
+cd "$BUILD_DIR"
+ctest --output-on-failure -j "$JOBS" --timeout 300 "$@"

@@ -1,0 +1,106 @@
+// Test helper: runs a program as a child process with its stdout on a pipe.
+#pragma once
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <optional>
+#include <regex>
+#include <string>
+#include <vector>
+
+namespace fusion::testing {
+
+class Subprocess {
+ public:
+  // Starts argv[0] with the given arguments; extra_env entries are "NAME=value".
+  explicit Subprocess(std::vector<std::string> argv, std::vector<std::string> extra_env = {}) {
+    int out[2];
+    if (pipe(out) != 0) return;
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], STDOUT_FILENO);
+      close(out[0]);
+      close(out[1]);
+      for (auto& e : extra_env) putenv(e.data());
+      std::vector<char*> args;
+      for (auto& a : argv) args.push_back(a.data());
+      args.push_back(nullptr);
+      execv(args[0], args.data());
+      _exit(127);
+    }
+    close(out[1]);
+    stdout_fd_ = out[0];
+    fcntl(stdout_fd_, F_SETFL, O_NONBLOCK);
+  }
+  ~Subprocess() {
+    if (pid_ > 0 && !exit_status_) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+    if (stdout_fd_ >= 0) close(stdout_fd_);
+  }
+  Subprocess(const Subprocess&) = delete;
+  Subprocess& operator=(const Subprocess&) = delete;
+
+  [[nodiscard]] bool started() const { return pid_ > 0; }
+  [[nodiscard]] pid_t pid() const { return pid_; }
+
+  // Reads stdout until `pattern` matches the text so far or the timeout passes; returns the
+  // first capture group (or the whole match).
+  std::optional<std::string> WaitForOutput(const std::string& pattern,
+                                           std::chrono::milliseconds timeout) {
+    const std::regex re(pattern);
+    const auto end = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < end) {
+      std::smatch match;
+      if (std::regex_search(output_, match, re)) return match.size() > 1 ? match[1] : match[0];
+      pollfd pfd{stdout_fd_, POLLIN, 0};
+      poll(&pfd, 1, 50);
+      char buffer[4096];
+      const ssize_t n = read(stdout_fd_, buffer, sizeof buffer);
+      if (n > 0) output_.append(buffer, static_cast<size_t>(n));
+      if (n == 0) break;  // closed: the child has exited
+    }
+    std::smatch match;
+    if (std::regex_search(output_, match, re)) return match.size() > 1 ? match[1] : match[0];
+    return std::nullopt;
+  }
+  [[nodiscard]] const std::string& output() const { return output_; }
+
+  // Sends a signal and waits for the exit; returns the exit code, 128+signal if killed by a
+  // signal, or -1 on timeout.
+  int Stop(int signal_number, std::chrono::milliseconds timeout) {
+    if (pid_ <= 0) return -1;
+    kill(pid_, signal_number);
+    return Wait(timeout);
+  }
+  int Wait(std::chrono::milliseconds timeout) {
+    const auto end = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < end) {
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+        return *exit_status_;
+      }
+      usleep(10000);
+    }
+    return -1;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int stdout_fd_ = -1;
+  std::string output_;
+  std::optional<int> exit_status_;
+};
+
+// A DDS domain id private to this test process (tests run in parallel).
+inline unsigned PrivateDomainId() { return 1 + static_cast<unsigned>(getpid()) % 200; }
+
+}  // namespace fusion::testing
