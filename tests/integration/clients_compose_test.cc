@@ -1,0 +1,72 @@
+// The compose deployment (docker/compose.yaml) is a valid compose file with the expected
+// services. Needs docker-compose (v1, validates offline); skipped without it.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+
+namespace {
+
+// The repository root: FUSION_SHARED_DATA_DIR is "<repo>/../shared/data".
+std::string RepoDir() {
+  std::string dir = FUSION_SHARED_DATA_DIR;
+  const std::string suffix = "/../shared/data";
+  return dir.substr(0, dir.size() - suffix.size());
+}
+
+// Runs a shell command; returns its exit status and combined output.
+int Shell(const std::string& command, std::string* output) {
+  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (pipe == nullptr) return -1;
+  char buffer[4096];
+  size_t n = 0;
+  while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) output->append(buffer, n);
+  const int status = pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+class ComposeTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::string out;
+    if (Shell("command -v docker-compose", &out) != 0) {
+      GTEST_SKIP() << "docker-compose is not installed (apt-get install --no-install-recommends "
+                      "docker-compose)";
+    }
+    compose_ = RepoDir() + "/docker/compose.yaml";
+    ASSERT_TRUE(std::ifstream(compose_).good()) << compose_ << " is missing";
+  }
+  std::string compose_;
+};
+
+TEST_F(ComposeTest, ConfigIsValid) {
+  std::string out;
+  EXPECT_EQ(Shell("docker-compose -f '" + compose_ + "' config -q", &out), 0) << out;
+}
+
+TEST_F(ComposeTest, HasTheServicesAndHealthCheck) {
+  std::string services;
+  ASSERT_EQ(Shell("docker-compose -f '" + compose_ + "' config --services", &services), 0)
+      << services;
+  for (const char* name : {"fusiond", "sensor-sr3000", "sensor-stoc", "client"}) {
+    EXPECT_NE(services.find(name), std::string::npos) << name << " missing in:\n" << services;
+  }
+  std::string config;
+  ASSERT_EQ(Shell("docker-compose -f '" + compose_ + "' config", &config), 0) << config;
+  EXPECT_NE(config.find("health"), std::string::npos);
+  EXPECT_NE(config.find("CYCLONEDDS_URI"), std::string::npos);
+}
+
+TEST_F(ComposeTest, BrokenFileIsRejected) {
+  // The validation itself can fail: a service without image or build.
+  const std::string path = ::testing::TempDir() + "/broken_compose.yaml";
+  std::ofstream(path) << "services:\n  x:\n    command: [true]\n    ports: {bad: mapping}\n";
+  std::string out;
+  EXPECT_NE(Shell("docker-compose -f '" + path + "' config -q", &out), 0) << out;
+  std::remove(path.c_str());
+}
+
+}  // namespace
