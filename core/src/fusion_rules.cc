@@ -30,13 +30,9 @@ std::vector<std::string> FusionRuleNames() {
   return {"bayes", "independent_opinion_pool", "max", "demorgan"};
 }
 
-double LogOdds(double probability) {
-  return std::log(probability / (1.0 - probability));
-}
+double LogOdds(double probability) { return std::log(probability / (1.0 - probability)); }
 
-double ProbabilityFromLogOdds(double log_odds) {
-  return 1.0 / (1.0 + std::exp(-log_odds));
-}
+double ProbabilityFromLogOdds(double log_odds) { return 1.0 / (1.0 + std::exp(-log_odds)); }
 
 double FuseIndependentOpinionPool(double p1, double p2) {
   const double occupied = p1 * p2;
@@ -48,9 +44,7 @@ double FuseIndependentOpinionPool(double p1, double p2) {
 
 double FuseMax(double p1, double p2) { return std::max(p1, p2); }
 
-double FuseDeMorgan(double p1, double p2) {
-  return 1.0 - (1.0 - p1) * (1.0 - p2);
-}
+double FuseDeMorgan(double p1, double p2) { return 1.0 - (1.0 - p1) * (1.0 - p2); }
 
 double Fuse(FusionRule rule, double p1, double p2) {
   switch (rule) {

@@ -16,8 +16,18 @@ double Logit(double p) {
   return std::log(p / (1.0 - p));
 }
 
+// Slot of a key: the 4 x 4 x 4 brick around the voxel is hashed (murmur3
+// finaliser) and the voxel's position inside the brick is added, so
+// neighbouring voxels share cache lines while a ray is traced and the table
+// iterates in brick order (cache-friendly fusion into the octree).
 std::uint64_t HashPacked(std::uint64_t packed) {
-  return packed * 0x9E3779B97F4A7C15ull;
+  const std::uint64_t local = (packed & 0x3) | ((packed >> 14) & 0xc) | ((packed >> 28) & 0x30);
+  std::uint64_t x =
+      packed & ~((std::uint64_t{3}) | (std::uint64_t{3} << 16) | (std::uint64_t{3} << 32));
+  x ^= x >> 33;
+  x *= 0xff51afd7ed558ccdull;
+  x ^= x >> 33;
+  return (x << 6) + local;
 }
 
 // One voxel crossing of a ray with its evidence.
@@ -25,6 +35,7 @@ struct Segment {
   octomap::OcTreeKey key;
   float evidence;
   float weight;
+  double t_out_m;  // range where the ray leaves the voxel
 };
 
 // Prior log-odds of an interval of n beam cells, cached by n.
@@ -48,8 +59,8 @@ class PriorCache {
   std::vector<double> cache_;
 };
 
-// Traces one ray of one beam (Amanatides & Woo voxel traversal) and appends its segments.
-// Returns the range at which the trace stopped.
+// Traces one ray of one beam (Amanatides & Woo voxel traversal) and appends its
+// segments. Returns the range at which the trace stopped.
 class RayTracer {
  public:
   RayTracer(const BeamGrid& grid, const RenderOptions& options)
@@ -95,8 +106,8 @@ class RayTracer {
       keys_.clear();
       boundaries_.push_back(t_in);
       while (keys_.size() < kChunkSegments && t_in < t_end) {
-        const int axis = (t_max[0] < t_max[1]) ? (t_max[0] < t_max[2] ? 0 : 2)
-                                               : (t_max[1] < t_max[2] ? 1 : 2);
+        const int axis =
+            (t_max[0] < t_max[1]) ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
         const double t_out = std::min(t_max[axis], t_end);
         keys_.emplace_back(static_cast<octomap::key_type>(index[0] + kTreeMaxVal),
                            static_cast<octomap::key_type>(index[1] + kTreeMaxVal),
@@ -117,7 +128,7 @@ class RayTracer {
         evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);
         const double length_m = boundaries_[j + 1] - boundaries_[j];
         out->push_back({keys_[j], static_cast<float>(evidence),
-                        static_cast<float>(length_m) * weight_scale});
+                        static_cast<float>(length_m) * weight_scale, boundaries_[j + 1]});
         remaining_mass *= (1.0 - p);
         if (remaining_mass < options_.tail_mass) {
           done = true;
@@ -148,7 +159,8 @@ octomap::OcTreeKey KeyOfPoint(const Eigen::Vector3d& p_world, double resolution_
   return octomap::OcTreeKey(
       static_cast<octomap::key_type>(static_cast<int>(std::floor(inv * p_world.x())) + kTreeMaxVal),
       static_cast<octomap::key_type>(static_cast<int>(std::floor(inv * p_world.y())) + kTreeMaxVal),
-      static_cast<octomap::key_type>(static_cast<int>(std::floor(inv * p_world.z())) + kTreeMaxVal));
+      static_cast<octomap::key_type>(static_cast<int>(std::floor(inv * p_world.z())) +
+                                     kTreeMaxVal));
 }
 
 Eigen::Vector3d KeyCenter(const octomap::OcTreeKey& key, double resolution_m) {
@@ -166,6 +178,7 @@ LocalGrid::LocalGrid(double resolution_m, VoxelCombine combine)
 void LocalGrid::Clear() {
   std::fill(entries_.begin(), entries_.end(), Entry{});
   size_ = 0;
+  last_ = 0;
 }
 
 void LocalGrid::Grow() {
@@ -179,27 +192,40 @@ void LocalGrid::Grow() {
     while (entries_[i].packed != kEmpty) i = (i + 1) & mask_;
     entries_[i] = e;
   }
+  last_ = 0;
 }
 
 void LocalGrid::AddEvidence(const octomap::OcTreeKey& key, double log_odds_evidence,
                             double weight) {
-  if (2 * (size_ + 1) > entries_.size()) Grow();
   const std::uint64_t packed = Pack(key);
-  std::size_t i = HashPacked(packed) & mask_;
-  while (entries_[i].packed != packed && entries_[i].packed != kEmpty) i = (i + 1) & mask_;
+  std::size_t i = last_;
+  if (entries_[i].packed != packed) {
+    if (2 * (size_ + 1) > entries_.size()) Grow();
+    i = HashPacked(packed) & mask_;
+    while (entries_[i].packed != packed && entries_[i].packed != kEmpty) i = (i + 1) & mask_;
+  }
+  last_ = i;
   Entry& e = entries_[i];
   const auto evidence = static_cast<float>(log_odds_evidence);
-  const auto w = static_cast<float>(weight);
-  if (e.packed == kEmpty) {
+  const bool fresh = e.packed == kEmpty;
+  if (fresh) {
     e.packed = packed;
-    e.max = evidence;
     ++size_;
-  } else {
-    e.max = std::max(e.max, evidence);
   }
-  e.sum_weighted += w * evidence;
-  e.sum_weight += w;
-  e.sum += evidence;
+  switch (combine_) {
+    case VoxelCombine::kWeightedMeanLogOdds: {
+      const auto w = static_cast<float>(weight);
+      e.a += w * evidence;
+      e.b += w;
+      break;
+    }
+    case VoxelCombine::kMaxLogOdds:
+      e.a = fresh ? evidence : std::max(e.a, evidence);
+      break;
+    case VoxelCombine::kIndependentPool:
+      e.a += evidence;
+      break;
+  }
 }
 
 const LocalGrid::Entry* LocalGrid::Find(std::uint64_t packed) const {
@@ -214,11 +240,10 @@ const LocalGrid::Entry* LocalGrid::Find(std::uint64_t packed) const {
 float LocalGrid::CombinedLogOdds(const Entry& e) const {
   switch (combine_) {
     case VoxelCombine::kWeightedMeanLogOdds:
-      return e.sum_weight > 0.0f ? e.sum_weighted / e.sum_weight : 0.0f;
+      return e.b > 0.0f ? e.a / e.b : 0.0f;
     case VoxelCombine::kMaxLogOdds:
-      return e.max;
     case VoxelCombine::kIndependentPool:
-      return e.sum;
+      return e.a;
   }
   return 0.0f;
 }
@@ -268,15 +293,22 @@ LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_
     ++s.beams_rendered;
     segments.clear();
     const Eigen::Vector3d dir_sensor = tess.Direction(b);
-    const double t_stop =
-        tracer.Trace(b, origin, R * dir_sensor, t_start, t_end, 1.0f, &segments);
+    const double t_stop = tracer.Trace(b, origin, R * dir_sensor, t_start, t_end, 1.0f, &segments);
     ++s.rays_traced;
     const int k = std::clamp(static_cast<int>(std::ceil(width_rad * t_stop / options.resolution_m)),
                              1, std::max(1, options.max_subrays_per_axis));
     if (k > 1) {
-      // The beam's footprint at the end of its evidence is wider than a voxel: spread k x k
-      // sub-rays uniformly over its azimuth x elevation sector, each with weight 1 / k^2.
-      segments.clear();
+      // The beam's footprint outgrows a voxel at r_split = resolution / width:
+      // keep the centre ray up to there and spread k x k sub-rays uniformly
+      // over its azimuth x elevation sector beyond, each with weight 1 / k^2.
+      const double r_split = options.resolution_m / width_rad;
+      double t_sub = t_start;
+      std::size_t keep = 0;
+      while (keep < segments.size() && segments[keep].t_out_m <= r_split) {
+        t_sub = segments[keep].t_out_m;
+        ++keep;
+      }
+      segments.resize(keep);
       const double az = std::atan2(dir_sensor.x(), dir_sensor.z());
       const double el = std::atan2(-dir_sensor.y(), std::hypot(dir_sensor.x(), dir_sensor.z()));
       const float weight = 1.0f / static_cast<float>(k * k);
@@ -286,7 +318,7 @@ LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_
           const double sub_el = el + ((j + 0.5) / k - 0.5) * tess.beam_width_v_rad();
           const Eigen::Vector3d d(std::cos(sub_el) * std::sin(sub_az), -std::sin(sub_el),
                                   std::cos(sub_el) * std::cos(sub_az));
-          tracer.Trace(b, origin, R * d, t_start, t_end, weight, &segments);
+          tracer.Trace(b, origin, R * d, t_sub, t_end, weight, &segments);
           ++s.rays_traced;
         }
       }

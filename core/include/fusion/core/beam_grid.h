@@ -2,13 +2,12 @@
 // a list of range cells updated with the forward model (paper Sec. II-C, IV-A).
 #pragma once
 
+#include <Eigen/Core>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <optional>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "fusion/core/sensor.h"
 
@@ -17,7 +16,8 @@ namespace fusion {
 // Beams on a uniform azimuth x elevation grid over the sensor's FOV.
 // azimuth = atan2(x, z) in [-fov_h/2, fov_h/2], column 0 at the left (x < 0);
 // elevation = atan2(-y, hypot(x, z)) in [-fov_v/2, fov_v/2], row 0 at the top.
-// beam index = row * cols + col.
+// beam index = row * cols + col. A direction exactly on the FOV edge belongs to the edge beam.
+// Range along a beam is the Euclidean norm of the point (not its projection on the axis).
 class BeamTessellation {
  public:
   explicit BeamTessellation(const SensorSpec& spec);
@@ -31,6 +31,12 @@ class BeamTessellation {
   // Angular size of one beam (full widths).
   [[nodiscard]] double beam_width_h_rad() const;
   [[nodiscard]] double beam_width_v_rad() const;
+
+ private:
+  int cols_ = 1;
+  int rows_ = 1;
+  double fov_h_rad_ = 0.0;
+  double fov_v_rad_ = 0.0;
 };
 
 enum class BeamRepresentation { kDense, kUnrolledLinkedList };
@@ -47,9 +53,9 @@ struct BeamGridOptions {
 
 // What happened to one cloud: every point is accounted for in exactly one counter.
 struct IntegrationStats {
-  std::size_t updated = 0;        // range readings applied
-  std::size_t beyond_range = 0;   // beyond-range readings applied (evidence for B_{N+1})
-  std::size_t missing = 0;        // NaN / zero points: no information, beam untouched
+  std::size_t updated = 0;             // range readings applied
+  std::size_t beyond_range = 0;        // beyond-range readings applied (evidence for B_{N+1})
+  std::size_t missing = 0;             // NaN / zero points: no information, beam untouched
   std::size_t rejected_nonfinite = 0;  // inf or mixed NaN coordinates
   std::size_t rejected_outside_fov = 0;
 };
@@ -63,6 +69,7 @@ struct Reading {
 
 class BeamGrid {
  public:
+  // Throws std::invalid_argument for an invalid spec (ValidateSensorSpec) or options.
   BeamGrid(const SensorSpec& spec, const BeamGridOptions& options);
   ~BeamGrid();
   BeamGrid(BeamGrid&&) noexcept;
@@ -72,18 +79,39 @@ class BeamGrid {
   [[nodiscard]] const BeamGridOptions& options() const;
   [[nodiscard]] const BeamTessellation& tessellation() const;
   [[nodiscard]] std::size_t cells_per_beam() const;  // N
+  [[nodiscard]] std::size_t beam_count() const;
+  // p0 actually used (options.prior_cell_occupancy resolved).
+  [[nodiscard]] double prior_cell_occupancy() const;
+  // Cells below this index are blind (range < r_min): p(r | B_i) = 0, treat as unknown.
+  [[nodiscard]] std::size_t first_visible_cell() const;
+  // Readings above this range are the outcome `beyond` (Algorithm III.1 line 1).
+  [[nodiscard]] double r_limit_m() const;
 
   // Applies one cloud of points in the sensor frame. points_xyz holds 3 floats per point.
   // beyond_range (optional, same length as the point count, may be empty) marks points whose
   // direction is valid but whose return lies beyond r_max.
+  // Per point: all-NaN or (0, 0, 0) -> missing (no information); any inf or a NaN mixed with
+  // numbers -> rejected_nonfinite; direction outside the FOV -> rejected_outside_fov; marked
+  // beyond or range > r_limit -> beyond_range (evidence for B_{N+1}); else updated. Several
+  // points in one beam are several samples, applied in order. Throws std::invalid_argument
+  // (before touching any beam) if points_xyz is null with point_count > 0 or beyond_range is
+  // neither empty nor point_count long.
   IntegrationStats Integrate(const float* points_xyz, std::size_t point_count,
                              const std::vector<std::uint8_t>& beyond_range = {});
-  // Applies one reading to one beam (Eq. 11).
-  void Update(std::size_t beam, const Reading& reading);
+  // Applies readings[b] to beam b for every beam (an organised frame, one reading per beam);
+  // readings.size() must equal beam_count() (std::invalid_argument otherwise). Faster than
+  // beam_count() calls to Update: beams are prefetched ahead. Returns the counts (points
+  // are never outside the FOV here; invalid ranges count as missing).
+  IntegrationStats UpdateEachBeam(const std::vector<Reading>& readings);
+  // Applies one reading to one beam (Eq. 11). kMissing, NaN, inf or negative ranges carry no
+  // information and leave the beam untouched (returns false). Throws std::out_of_range for a
+  // beam index >= beam_count(). Returns true if the beam was updated.
+  bool Update(std::size_t beam, const Reading& reading);
 
   // p(B_1..B_N, B_{N+1}) of one beam (N + 1 values, summing to 1).
   [[nodiscard]] std::vector<double> FirstHitProbabilities(std::size_t beam) const;
   // p(m_1..m_N) of one beam (Eq. 8; cells with no information keep their previous value).
+  // Cells with no information report the prior: the cached p(B) is the only state kept.
   [[nodiscard]] std::vector<double> CellProbabilities(std::size_t beam) const;
   // Occupancy of consecutive range intervals of one beam: boundaries_m (ascending, k+1 values,
   // in [0, N * cell_size]) gives k intervals; out[j] = P(some cell in interval j occupied |

@@ -1,8 +1,8 @@
-// Per-voxel fusion of occupancy opinions from several sensors (paper Eq. 16) and the
-// non-Bayesian alternatives the paper mentions (max, De Morgan).
+// Per-voxel fusion of occupancy opinions from several sensors (paper Eq. 16)
+// and the non-Bayesian alternatives the paper mentions (max, De Morgan).
 //
-// Every function takes and returns occupancy probabilities in [0, 1]; log-odds helpers use
-// the natural logarithm, as OctoMap does.
+// Every function takes and returns occupancy probabilities in [0, 1]; log-odds
+// helpers use the natural logarithm, as OctoMap does.
 #pragma once
 
 #include <optional>
@@ -12,16 +12,20 @@
 namespace fusion {
 
 enum class FusionRule {
-  // Eq. 16: p = p1 p2 / (p1 p2 + (1 - p1)(1 - p2)), i.e. log-odds add. 0.5 is neutral.
+  // Eq. 16: p = p1 p2 / (p1 p2 + (1 - p1)(1 - p2)), i.e. log-odds add. 0.5 is
+  // neutral.
   kIndependentOpinionPool,
   // p = max(p1, p2): conservative for obstacles, never lowers occupancy.
   kMax,
-  // p = 1 - (1 - p1)(1 - p2): "occupied if any sensor says occupied". 0 is neutral, so an
-  // unknown (0.5) voxel must be left out of the fusion rather than fused as 0.5.
+  // p = 1 - (1 - p1)(1 - p2): "occupied if any sensor says occupied". 0 is
+  // neutral, so an
+  // unknown (0.5) voxel must be left out of the fusion rather than fused as
+  // 0.5.
   kDeMorgan,
 };
 
-// "bayes" or "independent_opinion_pool", "max", "demorgan"; std::nullopt for anything else.
+// "bayes" or "independent_opinion_pool", "max", "demorgan"; std::nullopt for
+// anything else.
 [[nodiscard]] std::optional<FusionRule> FusionRuleFromName(const std::string& name);
 // Canonical name: "independent_opinion_pool", "max" or "demorgan".
 [[nodiscard]] std::string FusionRuleName(FusionRule rule);
@@ -30,7 +34,8 @@ enum class FusionRule {
 [[nodiscard]] double LogOdds(double probability);
 [[nodiscard]] double ProbabilityFromLogOdds(double log_odds);
 
-// Eq. 16 on two probabilities. Exact 0/1 inputs are handled (0 with 1 gives 0.5).
+// Eq. 16 on two probabilities. Exact 0/1 inputs are handled (0 with 1 gives
+// 0.5).
 [[nodiscard]] double FuseIndependentOpinionPool(double p1, double p2);
 [[nodiscard]] double FuseMax(double p1, double p2);
 [[nodiscard]] double FuseDeMorgan(double p1, double p2);

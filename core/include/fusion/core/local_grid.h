@@ -1,33 +1,38 @@
-// Rendering a sensor's beam grid into a local Cartesian grid (paper Sec. IV: "cell occupancy
-// probabilities are computed using (8) and written to a local occupancy grid using
-// ray-tracing, keeping in mind the relative offsets of the sensors").
+// Rendering a sensor's beam grid into a local Cartesian grid (paper Sec. IV:
+// "cell occupancy probabilities are computed using (8) and written to a local
+// occupancy grid using ray-tracing, keeping in mind the relative offsets of the
+// sensors").
 //
-// The local grid is keyed by OctoMap keys of the world-frame map at the same resolution, so a
-// rendered grid fuses into the world octree voxel by voxel without resampling.
+// The local grid is keyed by OctoMap keys of the world-frame map at the same
+// resolution, so a rendered grid fuses into the world octree voxel by voxel
+// without resampling.
 #pragma once
 
+#include <octomap/OcTree.h>
+
+#include <Eigen/Geometry>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <utility>
 #include <vector>
 
-#include <Eigen/Geometry>
-#include <octomap/OcTreeKey.h>
-
 #include "fusion/core/beam_grid.h"
 
 namespace fusion {
 
-// How the opinions of several beam segments that cross one voxel become one probability.
-// Each segment contributes its evidence e = logit(p_segment) - logit(prior(segment length)),
-// i.e. log-odds relative to what an untouched beam reports, weighted by its crossing length.
+// How the opinions of several beam segments that cross one voxel become one
+// probability. Each segment contributes its evidence e = logit(p_segment) -
+// logit(prior(segment length)), i.e. log-odds relative to what an untouched
+// beam reports, weighted by its crossing length.
 enum class VoxelCombine {
-  // Length-weighted mean of the segments' evidence (default; see docs/mapping.md).
+  // Length-weighted mean of the segments' evidence (default; see
+  // docs/mapping.md).
   kWeightedMeanLogOdds,
   // The segment with the largest evidence wins (obstacle-conservative).
   kMaxLogOdds,
-  // Sum of the segments' evidence (treats overlapping beams as independent observations).
+  // Sum of the segments' evidence (treats overlapping beams as independent
+  // observations).
   kIndependentPool,
 };
 
@@ -37,12 +42,14 @@ struct RenderOptions {
   static constexpr double kDefaultMaxAbsLogOdds = 12.0;
 
   double resolution_m = 0.02;
-  VoxelCombine combine = VoxelCombine::kWeightedMeanLogOdds;
-  // A ray stops after the voxel where the remaining first-hit mass S (relative to where the
-  // rendering started) falls below this: everything behind carries no information.
+  VoxelCombine combine = VoxelCombine::kMaxLogOdds;
+  // A ray stops after the voxel where the remaining first-hit mass S (relative
+  // to where the rendering started) falls below this: everything behind carries
+  // no information.
   double tail_mass = kDefaultTailMass;
-  // A beam wider than a voxel at the range where its evidence ends is traced with k x k
-  // sub-rays spread over its spherical sector, k = ceil(width * range / resolution) <= this.
+  // A beam wider than a voxel at the range where its evidence ends is traced
+  // with k x k sub-rays spread over its spherical sector, k = ceil(width *
+  // range / resolution) <= this.
   int max_subrays_per_axis = kDefaultMaxSubraysPerAxis;
   // Rays are traced no further than this (metres from the sensor origin).
   double max_range_m = 1e9;
@@ -64,20 +71,22 @@ struct RenderStats {
 // Centre of a voxel, world frame, metres.
 [[nodiscard]] Eigen::Vector3d KeyCenter(const octomap::OcTreeKey& key, double resolution_m);
 
-// A sparse grid of voxel evidence (open addressing hash table keyed by packed OcTreeKey).
+// A sparse grid of voxel evidence (open addressing hash table keyed by packed
+// OcTreeKey).
 class LocalGrid {
  public:
-  explicit LocalGrid(double resolution_m,
-                     VoxelCombine combine = VoxelCombine::kWeightedMeanLogOdds);
+  explicit LocalGrid(double resolution_m, VoxelCombine combine = VoxelCombine::kMaxLogOdds);
 
   [[nodiscard]] double resolution_m() const { return resolution_m_; }
   [[nodiscard]] VoxelCombine combine() const { return combine_; }
   [[nodiscard]] std::size_t size() const { return size_; }
   [[nodiscard]] bool empty() const { return size_ == 0; }
 
-  // Adds one segment's evidence (log-odds relative to the prior) with a weight (> 0).
+  // Adds one segment's evidence (log-odds relative to the prior) with a weight
+  // (> 0).
   void AddEvidence(const octomap::OcTreeKey& key, double log_odds_evidence, double weight);
-  // Combined occupancy probability of a voxel; std::nullopt if no segment touched it.
+  // Combined occupancy probability of a voxel; std::nullopt if no segment
+  // touched it.
   [[nodiscard]] std::optional<double> Probability(const octomap::OcTreeKey& key) const;
   [[nodiscard]] std::optional<double> LogOddsOf(const octomap::OcTreeKey& key) const;
   // Every voxel with its combined log-odds (unordered).
@@ -93,12 +102,13 @@ class LocalGrid {
 
  private:
   static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};
+  // 16 bytes: what the combination rule needs, nothing more.
+  //   mean: a = sum of w * e, b = sum of w;  max: a = max e;  pool: a = sum of
+  //   e.
   struct Entry {
     std::uint64_t packed = kEmpty;
-    float sum_weighted = 0.0f;  // sum of w * e
-    float sum_weight = 0.0f;    // sum of w
-    float sum = 0.0f;           // sum of e
-    float max = 0.0f;           // max of e
+    float a = 0.0f;
+    float b = 0.0f;
   };
   static std::uint64_t Pack(const octomap::OcTreeKey& key) {
     return std::uint64_t{key.k[0]} | (std::uint64_t{key.k[1]} << 16) |
@@ -118,15 +128,19 @@ class LocalGrid {
   std::vector<Entry> entries_;
   std::size_t size_ = 0;
   std::size_t mask_ = 0;
+  std::size_t last_ = 0;  // slot of the last voxel touched: consecutive
+                          // segments often repeat it
 };
 
-// Ray-traces every touched beam of the grid from the sensor pose T_world_sensor (sensor
-// optical frame -> world, mount offsets included) into a local grid at options.resolution_m.
-// Each voxel a ray crosses between r_min and the point where the beam's evidence is exhausted
-// gets the beam's interval occupancy over exactly its crossing interval (BeamGrid::
-// IntervalOccupancy), so beam cells finer than a voxel are aggregated exactly. Voxels crossed
-// by no touched beam, cells below r_min and voxels behind surfaces are left out (unknown).
-[[nodiscard]] LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+// Ray-traces every touched beam of the grid from the sensor pose T_world_sensor
+// (sensor optical frame -> world, mount offsets included) into a local grid at
+// options.resolution_m. Each voxel a ray crosses between r_min and the point
+// where the beam's evidence is exhausted gets the beam's interval occupancy
+// over exactly its crossing interval (BeamGrid:: IntervalOccupancy), so beam
+// cells finer than a voxel are aggregated exactly. Voxels crossed by no touched
+// beam, cells below r_min and voxels behind surfaces are left out (unknown).
+[[nodiscard]] LocalGrid RenderBeamGrid(const BeamGrid& grid,
+                                       const Eigen::Isometry3d& T_world_sensor,
                                        const RenderOptions& options, RenderStats* stats = nullptr);
 
 }  // namespace fusion

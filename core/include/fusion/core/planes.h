@@ -1,0 +1,65 @@
+// Plane detection on the fused octree (paper Sec. V): a Hough transform over
+// (phi, theta, d) voting with the occupancy probability of every leaf, peak
+// extraction with non-maximum suppression and a weighted least-squares
+// refinement on the supporting voxels.
+//
+// Convention: a plane is {p : n . p = d} in the world frame with d >= 0
+// (metres) and unit normal n = (sin(theta) cos(phi), sin(theta) sin(phi),
+// cos(theta)), phi in [-pi, pi) the normal's azimuth, theta in [0, pi] its
+// polar angle from +z. A plane through the origin keeps the normal with theta
+// <= pi/2.
+#pragma once
+
+#include <octomap/OcTree.h>
+
+#include <Eigen/Geometry>
+#include <cstddef>
+#include <optional>
+#include <vector>
+
+namespace fusion {
+
+struct HoughOptions {
+  static constexpr double kDegree = 0.017453292519943295;
+
+  double phi_bin_rad = 2.0 * kDegree;
+  double theta_bin_rad = 2.0 * kDegree;
+  double d_bin_m = 0.02;
+  // Leaves at or below this occupancy do not vote.
+  double min_probability = 0.5;
+  // Only leaves whose centre lies in this box vote (world frame); everything if
+  // unset.
+  std::optional<Eigen::AlignedBox3d> region;
+  std::size_t max_planes = 8;
+  // Peaks closer than this to a stronger one (normal angle and distance) are
+  // suppressed.
+  double nms_angle_rad = 10.0 * kDegree;
+  double nms_distance_m = 0.10;
+  // A plane needs at least this many supporting voxels after refinement.
+  std::size_t min_support_voxels = 50;
+  // Voxels within this distance of a peak's plane support it (refinement); 0
+  // = 1.5 voxels.
+  double support_distance_m = 0.0;
+  int refine_iterations = 3;
+};
+
+struct Plane {
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // unit, world frame
+  double distance_m = 0.0;                            // d >= 0
+  double phi_rad = 0.0;
+  double theta_rad = 0.0;
+  double votes = 0.0;              // sum of p(m) of the supporting voxels
+  std::size_t support_voxels = 0;  // voxels within support_distance of the plane
+  double rms_m = 0.0;              // RMS distance of the supporting voxel centres
+  Eigen::AlignedBox3d extent;      // bounding box of the supporting voxel centres
+};
+
+// Normal from the angles and back (see the convention above).
+[[nodiscard]] Eigen::Vector3d NormalFromAngles(double phi_rad, double theta_rad);
+// Puts (n, d) in canonical form (d >= 0) and fills phi/theta.
+[[nodiscard]] Plane CanonicalPlane(const Eigen::Vector3d& normal, double distance_m);
+// Planes sorted by votes, strongest first.
+[[nodiscard]] std::vector<Plane> DetectPlanes(const octomap::OcTree& tree,
+                                              const HoughOptions& options = {});
+
+}  // namespace fusion

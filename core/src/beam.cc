@@ -1,0 +1,481 @@
+// Beam representations: dense reference and unrolled linked list (paper Sec. II-C, IV-A).
+#include "fusion/core/beam.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <utility>
+
+namespace fusion {
+namespace {
+
+// Largest ULL factor table (entries); beyond it factors are computed on the fly.
+constexpr std::size_t kMaxTableEntries = std::size_t{1} << 25;
+
+}  // namespace
+
+double ResolvePriorCellOccupancy(const BeamGridOptions& options) {
+  double p0 = options.prior_cell_occupancy;
+  if (p0 < 0.0) {
+    if (!(options.prior_reference_length_m > 0.0) ||
+        !std::isfinite(options.prior_reference_length_m)) {
+      throw std::invalid_argument("prior_reference_length_m must be finite and > 0");
+    }
+    p0 = 1.0 - std::pow(0.5, options.cell_size_m / options.prior_reference_length_m);
+  }
+  if (!(p0 > 0.0 && p0 < 1.0)) {
+    throw std::invalid_argument("prior cell occupancy must lie in (0, 1)");
+  }
+  return p0;
+}
+
+std::vector<double> FirstHitFromCells(const std::vector<double>& p_m) {
+  std::vector<double> p_b(p_m.size() + 1);
+  double all_free_so_far = 1.0;  // prod_{j<i} (1 - p(m_j))
+  for (std::size_t i = 0; i < p_m.size(); ++i) {
+    p_b[i] = p_m[i] * all_free_so_far;
+    all_free_so_far *= 1.0 - p_m[i];
+  }
+  p_b.back() = all_free_so_far;
+  return p_b;
+}
+
+std::vector<double> CellsFromFirstHit(const std::vector<double>& weights,
+                                      double no_information_value) {
+  if (weights.empty()) return {};
+  const std::size_t n = weights.size() - 1;
+  std::vector<double> tail(n + 1);
+  double acc = weights[n];
+  tail[n] = acc;
+  for (std::size_t i = n; i-- > 0;) {
+    acc += weights[i];
+    tail[i] = acc;
+  }
+  const double threshold = kNoInformationTail * tail[0];
+  std::vector<double> p_m(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    // Eq. 8: 1 - sum_{j<i} p(B_j) is the tail mass from i on (total normalised to 1).
+    p_m[i] = tail[i] > threshold ? std::min(1.0, weights[i] / tail[i]) : no_information_value;
+  }
+  return p_m;
+}
+
+// ---------------------------------------------------------------------------------------------
+// BeamContext
+
+BeamContext::BeamContext(const SensorSpec& spec, const BeamGridOptions& options)
+    : model_(MakeForwardModel(spec, options.cell_size_m)),
+      prior_(ResolvePriorCellOccupancy(options)) {
+  const std::size_t n = cell_count();
+  const double r = rho();
+  rho_pow_.resize(n + 1);
+  geom_sum_.resize(n + 2);
+  geom_sum_[0] = 0.0;
+  for (std::size_t j = 0; j <= n; ++j) {
+    rho_pow_[j] = std::pow(r, static_cast<double>(j));
+    geom_sum_[j + 1] = geom_sum_[j] + rho_pow_[j];
+  }
+  // ROI spans, B_{N+1} factors and the factor table, outcome by outcome.
+  const std::size_t outcomes = disc().outcome_count();
+  roi_begin_.resize(outcomes);
+  roi_end_.resize(outcomes);
+  all_free_factor_.resize(outcomes);
+  std::size_t entries = 0;
+  for (std::size_t o = 0; o < outcomes; ++o) {
+    const CellSpan span = model_->Roi(o);
+    const std::size_t b = std::max(span.begin, disc().first_visible_cell);
+    const std::size_t e = std::min(span.end, n);
+    roi_begin_[o] = static_cast<std::uint32_t>(e > b ? b : 0);
+    roi_end_[o] = static_cast<std::uint32_t>(e > b ? e : 0);
+    entries += roi_end_[o] - roi_begin_[o];
+    all_free_factor_[o] = Factor(n, o);
+  }
+  if (entries <= kMaxTableEntries) {
+    table_offset_.resize(outcomes + 1);
+    table_.resize(entries);
+    std::size_t at = 0;
+    for (std::size_t o = 0; o < outcomes; ++o) {
+      table_offset_[o] = at;
+      for (std::size_t i = roi_begin_[o]; i < roi_end_[o]; ++i) table_[at++] = Factor(i, o);
+    }
+    table_offset_[outcomes] = at;
+  }
+}
+
+double BeamContext::Factor(std::size_t cell, std::size_t outcome) const {
+  return model_->Probability(cell, outcome) / model_->OutsideRoiProbability(outcome);
+}
+
+std::size_t BeamContext::MemoryBytes() const {
+  // The model's own per-cell / per-bin tables are small next to table_; counted roughly.
+  const std::size_t n = cell_count();
+  const std::size_t model_bytes = 6 * n * sizeof(double) + 2 * disc().bin_count * 4;
+  return sizeof(*this) + model_bytes +
+         (rho_pow_.capacity() + geom_sum_.capacity() + table_.capacity() +
+          all_free_factor_.capacity()) *
+             sizeof(double) +
+         table_offset_.capacity() * sizeof(std::size_t) +
+         (roi_begin_.capacity() + roi_end_.capacity()) * sizeof(std::uint32_t);
+}
+
+// ---------------------------------------------------------------------------------------------
+// DenseBeam
+
+DenseBeam::DenseBeam(const BeamContext& ctx) { Reset(ctx); }
+
+void DenseBeam::Reset(const BeamContext& ctx) {
+  const std::size_t n = ctx.cell_count();
+  p_.resize(n + 1);
+  // Eq. 7 with p(m_i) = p0 for every cell.
+  for (std::size_t i = 0; i < n; ++i) p_[i] = ctx.prior() * ctx.RhoPow(i);
+  p_[n] = ctx.RhoPow(n);
+  touched_ = false;
+}
+
+void DenseBeam::Update(const BeamContext& ctx, std::size_t outcome) {
+  const ForwardModel& model = ctx.model();
+  double sum = 0.0;
+  for (std::size_t i = 0; i < p_.size(); ++i) {
+    p_[i] *= model.Probability(i, outcome);  // Eq. 11 numerator
+    sum += p_[i];
+  }
+  touched_ = true;
+  if (!(sum > 0.0) || !std::isfinite(sum)) {  // impossible outcome under p(B): start afresh
+    Reset(ctx);
+    touched_ = true;
+    return;
+  }
+  const double eta = 1.0 / sum;  // Eq. 11 normaliser
+  for (double& p : p_) p *= eta;
+}
+
+void DenseBeam::Weights(const BeamContext& /*ctx*/, std::vector<double>* weights) const {
+  *weights = p_;
+}
+
+void DenseBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
+                           std::vector<double>* out) const {
+  out->assign(cells.size(), 0.0);
+  const std::size_t n = ctx.cell_count();
+  double acc = p_[n];
+  std::size_t i = n;
+  for (std::size_t j = cells.size(); j-- > 0;) {
+    const std::size_t target = std::min<std::size_t>(cells[j], n);
+    while (i > target) acc += p_[--i];
+    (*out)[j] = acc;
+  }
+}
+
+std::size_t DenseBeam::MemoryBytes() const {
+  return sizeof(*this) + p_.capacity() * sizeof(double);
+}
+
+// ---------------------------------------------------------------------------------------------
+// UllBeam
+
+UllBeam::UllBeam(const BeamContext& ctx) { Reset(ctx); }
+
+void UllBeam::Reset(const BeamContext& ctx) {
+  std::vector<Composite>().swap(list_);
+  std::vector<double>().swap(pool_);
+  const std::size_t n = ctx.cell_count();
+  const std::size_t visible = std::min(ctx.disc().first_visible_cell, n);
+  // Split at the r_min boundary: blind and visible cells see different constant models.
+  if (visible > 0) {
+    list_.push_back({0, static_cast<std::uint32_t>(visible), 0, 0, ctx.prior()});
+  }
+  if (visible < n) {
+    list_.push_back({static_cast<std::uint32_t>(visible), static_cast<std::uint32_t>(n - visible),
+                     0, 0, ctx.prior() * ctx.RhoPow(visible)});
+  }
+  w_all_free_ = ctx.RhoPow(n);
+  total_ = w_all_free_;
+  for (const Composite& c : list_) total_ += CompositeSum(ctx, c);
+  touched_ = false;
+}
+
+std::size_t UllBeam::Find(std::size_t cell) const {
+  auto it = std::upper_bound(list_.begin(), list_.end(), cell,
+                             [](std::size_t value, const Composite& c) { return value < c.first; });
+  return static_cast<std::size_t>(it - list_.begin()) - 1;
+}
+
+double UllBeam::CompositeSum(const BeamContext& ctx, const Composite& c) const {
+  if (c.exploded == 0) return c.w_first * ctx.GeomSum(c.count);
+  double s = 0.0;
+  for (std::uint32_t t = c.count; t-- > 0;) s += pool_[c.pool_begin + t];
+  return s;
+}
+
+std::size_t UllBeam::Explode(const BeamContext& ctx, std::size_t begin, std::size_t end) {
+  const std::size_t hit = Find(begin);
+  if (list_[hit].exploded != 0 && std::size_t{list_[hit].first} + list_[hit].count >= end) {
+    return hit;  // steady state: the ROI already lies in one EC
+  }
+  std::size_t pos = begin;
+  while (pos < end) {
+    std::size_t idx = Find(pos);
+    const Composite c = list_[idx];
+    const std::size_t c_end = std::size_t{c.first} + c.count;
+    if (c.exploded != 0) {
+      pos = c_end;
+      continue;
+    }
+    // Split the UEC into [c.first, a) UEC, [a, b) EC, [b, c_end) UEC.
+    const std::size_t a = pos;
+    const std::size_t b = std::min(c_end, end);
+    const std::uint32_t len = static_cast<std::uint32_t>(b - a);
+    const std::uint32_t at = c.pool_begin;
+    pool_.insert(pool_.begin() + at, len, 0.0);
+    for (std::uint32_t t = 0; t < len; ++t) {
+      pool_[at + t] = c.w_first * ctx.RhoPow(a + t - c.first);
+    }
+    for (std::size_t k = idx + 1; k < list_.size(); ++k) list_[k].pool_begin += len;
+    Composite pieces[3];
+    std::size_t count = 0;
+    if (a > c.first) {
+      pieces[count++] = {c.first, static_cast<std::uint32_t>(a - c.first), at, 0, c.w_first};
+    }
+    const std::size_t ec = idx + count;
+    pieces[count++] = {static_cast<std::uint32_t>(a), len, at, 1, 0.0};
+    if (b < c_end) {
+      pieces[count++] = {static_cast<std::uint32_t>(b), static_cast<std::uint32_t>(c_end - b),
+                         at + len, 0, c.w_first * ctx.RhoPow(b - c.first)};
+    }
+    list_[idx] = pieces[0];
+    list_.insert(list_.begin() + static_cast<std::ptrdiff_t>(idx) + 1, pieces + 1, pieces + count);
+    // Merge with EC neighbours (their pool values are adjacent: the pool is in list order).
+    std::size_t e = ec;
+    if (e + 1 < list_.size() && list_[e + 1].exploded != 0) {
+      list_[e].count += list_[e + 1].count;
+      list_.erase(list_.begin() + static_cast<std::ptrdiff_t>(e) + 1);
+    }
+    if (e > 0 && list_[e - 1].exploded != 0) {
+      list_[e - 1].count += list_[e].count;
+      list_.erase(list_.begin() + static_cast<std::ptrdiff_t>(e));
+    }
+    pos = b;
+  }
+  return Find(begin);
+}
+
+void UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
+  if (!touched_) {
+    // Blind cells have p(r | B_i) = 0 for every outcome: the first reading zeroes them.
+    const std::size_t visible = ctx.disc().first_visible_cell;
+    for (Composite& c : list_) {
+      if (c.first >= visible) break;
+      total_ -= CompositeSum(ctx, c);
+      c.w_first = 0.0;
+      for (std::uint32_t t = 0; c.exploded != 0 && t < c.count; ++t) pool_[c.pool_begin + t] = 0;
+    }
+    touched_ = true;
+  }
+  double delta = 0.0;
+  const BeamContext::RoiFactors roi = ctx.Roi(outcome);
+  if (roi.end > roi.begin) {
+    const Composite& c = list_[Explode(ctx, roi.begin, roi.end)];
+    double* v = pool_.data() + c.pool_begin + (roi.begin - c.first);
+    const std::size_t len = roi.end - roi.begin;
+    if (roi.factors != nullptr) {
+      // delta = sum_t v_t (f_t - 1), four independent sums to break the add chain.
+      const double* f = roi.factors;
+      double d[4] = {0.0, 0.0, 0.0, 0.0};
+      std::size_t t = 0;
+      for (; t + 4 <= len; t += 4) {
+        for (std::size_t u = 0; u < 4; ++u) {
+          const double old = v[t + u];
+          v[t + u] = old * f[t + u];
+          d[u] += old * (f[t + u] - 1.0);
+        }
+      }
+      for (; t < len; ++t) {
+        const double old = v[t];
+        v[t] = old * f[t];
+        d[0] += old * (f[t] - 1.0);
+      }
+      delta = (d[0] + d[1]) + (d[2] + d[3]);
+    } else {
+      for (std::size_t t = 0; t < len; ++t) {
+        const double old = v[t];
+        v[t] = old * ctx.Factor(roi.begin + t, outcome);
+        delta += v[t] - old;
+      }
+    }
+  }
+  const double g = ctx.AllFreeFactor(outcome);
+  const double old_free = w_all_free_;
+  w_all_free_ *= g;
+  delta += w_all_free_ - old_free;
+  total_ += delta;
+  if (!(total_ >= kLowTotal && total_ <= kHighTotal)) Renormalise(ctx);
+}
+
+void UllBeam::Renormalise(const BeamContext& ctx) {
+  double exact = w_all_free_;
+  for (const Composite& c : list_) exact += CompositeSum(ctx, c);
+  if (!(exact > 0.0) || !std::isfinite(exact)) {  // impossible outcome: start afresh
+    Reset(ctx);
+    touched_ = true;
+    return;
+  }
+  const double scale = 1.0 / exact;
+  for (Composite& c : list_) c.w_first *= scale;
+  for (double& v : pool_) v *= scale;
+  w_all_free_ *= scale;
+  total_ = 1.0;
+}
+
+void UllBeam::Weights(const BeamContext& ctx, std::vector<double>* weights) const {
+  const std::size_t n = ctx.cell_count();
+  weights->resize(n + 1);
+  for (const Composite& c : list_) {
+    for (std::uint32_t t = 0; t < c.count; ++t) {
+      (*weights)[c.first + t] =
+          c.exploded != 0 ? pool_[c.pool_begin + t] : c.w_first * ctx.RhoPow(t);
+    }
+  }
+  (*weights)[n] = w_all_free_;
+}
+
+void UllBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
+                         std::vector<double>* out) const {
+  out->assign(cells.size(), 0.0);
+  const std::size_t n = ctx.cell_count();
+  double acc = w_all_free_;
+  std::size_t j = cells.size();
+  while (j > 0 && cells[j - 1] >= n) (*out)[--j] = acc;
+  for (std::size_t k = list_.size(); k-- > 0;) {
+    const Composite& c = list_[k];
+    const std::size_t c_end = std::size_t{c.first} + c.count;
+    if (c.exploded == 0) {
+      while (j > 0 && cells[j - 1] >= c.first) {
+        const std::size_t from = std::min<std::size_t>(cells[j - 1], c_end);
+        (*out)[--j] = acc + c.w_first * ctx.RhoPow(from - c.first) * ctx.GeomSum(c_end - from);
+      }
+      acc += c.w_first * ctx.GeomSum(c.count);
+    } else {
+      double part = 0.0;
+      std::size_t t = c.count;
+      while (j > 0 && cells[j - 1] >= c.first) {
+        const std::size_t target = std::min<std::size_t>(cells[j - 1], c_end) - c.first;
+        while (t > target) part += pool_[c.pool_begin + --t];
+        (*out)[--j] = acc + part;
+      }
+      while (t > 0) part += pool_[c.pool_begin + --t];
+      acc += part;
+    }
+  }
+  while (j > 0) (*out)[--j] = acc;
+}
+
+void UllBeam::Prefetch() const {
+  // The composite list and the start of the EC pool (an ROI is typically ~1 KB of doubles).
+  __builtin_prefetch(list_.data());
+  const char* pool = reinterpret_cast<const char*>(pool_.data());
+  const std::size_t bytes = std::min<std::size_t>(pool_.size() * sizeof(double), 1536);
+  for (std::size_t at = 0; at < bytes; at += 64) __builtin_prefetch(pool + at, 1);
+}
+
+std::size_t UllBeam::MemoryBytes() const {
+  return sizeof(*this) + list_.capacity() * sizeof(Composite) + pool_.capacity() * sizeof(double);
+}
+
+double UllBeam::CompositeModel(const BeamContext& ctx, std::size_t index,
+                               std::size_t outcome) const {
+  const Composite& c = list_.at(index);
+  if (c.exploded != 0) return CompositeModelExact(ctx, index, outcome);
+  const ForwardModel& model = ctx.model();
+  const std::size_t first = c.first;
+  const std::size_t last = first + c.count - 1;
+  if (c.count == 1) return model.Probability(first, outcome);
+  // Weights relative to w_first (the common factor cancels in the ratio).
+  if (c.count == 2) {
+    const double wa = 1.0;
+    const double wb = ctx.RhoPow(1);
+    return (wa * model.Probability(first, outcome) + wb * model.Probability(last, outcome)) /
+           (wa + wb);
+  }
+  const std::size_t mid = first + (c.count - 1) / 2;
+  const double wa = 1.0;
+  const double wm = 4.0 * ctx.RhoPow(mid - first);
+  const double wb = ctx.RhoPow(last - first);
+  const double norm = wa + wm + wb;
+  if (!(norm > 0.0)) return model.Probability(first, outcome);
+  return (wa * model.Probability(first, outcome) + wm * model.Probability(mid, outcome) +
+          wb * model.Probability(last, outcome)) /
+         norm;
+}
+
+double UllBeam::CompositeModelExact(const BeamContext& ctx, std::size_t index,
+                                    std::size_t outcome) const {
+  const Composite& c = list_.at(index);
+  const ForwardModel& model = ctx.model();
+  double num = 0.0;
+  double den = 0.0;
+  for (std::uint32_t t = 0; t < c.count; ++t) {
+    const double w = c.exploded != 0 ? pool_[c.pool_begin + t] : ctx.RhoPow(t);
+    num += w * model.Probability(c.first + t, outcome);
+    den += w;
+  }
+  return den > 0.0 ? num / den : model.Probability(c.first, outcome);
+}
+
+// ---------------------------------------------------------------------------------------------
+// BeamStore
+
+namespace {
+
+template <class Beam>
+class BeamStoreOf final : public BeamStore {
+ public:
+  BeamStoreOf(std::shared_ptr<const BeamContext> ctx, std::size_t beams) : ctx_(std::move(ctx)) {
+    beams_.reserve(beams);
+    for (std::size_t b = 0; b < beams; ++b) beams_.emplace_back(*ctx_);
+  }
+  std::size_t beam_count() const override { return beams_.size(); }
+  void Update(std::size_t beam, std::size_t outcome) override {
+    beams_[beam].Update(*ctx_, outcome);
+  }
+  void UpdateMany(const BeamOutcome* updates, std::size_t count) override {
+    constexpr std::size_t kAhead = 4;
+    for (std::size_t k = 0; k < count && k < kAhead; ++k) beams_[updates[k].beam].Prefetch();
+    for (std::size_t k = 0; k < count; ++k) {
+      if (k + kAhead < count) beams_[updates[k + kAhead].beam].Prefetch();
+      beams_[updates[k].beam].Update(*ctx_, updates[k].outcome);
+    }
+  }
+  void Weights(std::size_t beam, std::vector<double>* weights) const override {
+    beams_[beam].Weights(*ctx_, weights);
+  }
+  void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
+                  std::vector<double>* out) const override {
+    beams_[beam].TailMasses(*ctx_, cells, out);
+  }
+  bool Touched(std::size_t beam) const override { return beams_[beam].touched(); }
+  void Reset() override {
+    for (Beam& b : beams_) b.Reset(*ctx_);
+  }
+  std::size_t MemoryBytes() const override {
+    std::size_t bytes = sizeof(*this) + (beams_.capacity() - beams_.size()) * sizeof(Beam);
+    for (const Beam& b : beams_) bytes += b.MemoryBytes();
+    return bytes;
+  }
+
+ private:
+  std::shared_ptr<const BeamContext> ctx_;
+  std::vector<Beam> beams_;
+};
+
+}  // namespace
+
+std::unique_ptr<BeamStore> MakeBeamStore(BeamRepresentation representation,
+                                         std::shared_ptr<const BeamContext> context,
+                                         std::size_t beam_count) {
+  if (representation == BeamRepresentation::kDense) {
+    return std::make_unique<BeamStoreOf<DenseBeam>>(std::move(context), beam_count);
+  }
+  return std::make_unique<BeamStoreOf<UllBeam>>(std::move(context), beam_count);
+}
+
+}  // namespace fusion

@@ -1,0 +1,89 @@
+#include "fusion/core/planes.h"
+
+#include <gtest/gtest.h>
+#include <octomap/OcTree.h>
+
+#include <cmath>
+#include <random>
+
+namespace fusion {
+namespace {
+
+constexpr double kDeg = HoughOptions::kDegree;
+constexpr double kRes = 0.02;
+
+void AddPlanePatch(octomap::OcTree* tree, const Eigen::Vector3d& center, const Eigen::Vector3d& u,
+                   const Eigen::Vector3d& v, double half_u, double half_v, float log_odds) {
+  for (double a = -half_u; a <= half_u; a += kRes / 2) {
+    for (double b = -half_v; b <= half_v; b += kRes / 2) {
+      const Eigen::Vector3d p = center + a * u + b * v;
+      tree->setNodeValue(p.x(), p.y(), p.z(), log_odds, true);
+    }
+  }
+}
+
+double AngleDiff(double a, double b) {
+  return std::abs(std::remainder(a - b, 2.0 * 3.14159265358979323846));
+}
+
+TEST(Planes, AnglesAndCanonicalForm) {
+  const Plane p = CanonicalPlane(Eigen::Vector3d(-1, 0, 0), -1.75);
+  EXPECT_NEAR(p.distance_m, 1.75, 1e-12);
+  EXPECT_NEAR(p.phi_rad, 0.0, 1e-12);
+  EXPECT_NEAR(p.theta_rad, 90 * kDeg, 1e-12);
+  EXPECT_TRUE(NormalFromAngles(p.phi_rad, p.theta_rad).isApprox(p.normal));
+  const Plane floor = CanonicalPlane(Eigen::Vector3d(0, 0, 1), -0.41);
+  EXPECT_NEAR(floor.theta_rad, 180 * kDeg, 1e-9);
+  EXPECT_NEAR(floor.distance_m, 0.41, 1e-12);
+}
+
+TEST(Planes, FindsBoardAndFloor) {
+  octomap::OcTree tree(kRes);
+  AddPlanePatch(&tree, {1.75, 0.0, 0.2}, Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(), 0.6,
+                0.5, 2.0f);
+  AddPlanePatch(&tree, {1.4, 0.0, -0.41}, Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), 0.3,
+                0.7, 2.0f);
+  // Free voxels do not vote.
+  AddPlanePatch(&tree, {1.0, 0.0, 0.0}, Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(), 0.5,
+                0.5, -2.0f);
+  tree.updateInnerOccupancy();
+  const auto planes = DetectPlanes(tree);
+  ASSERT_GE(planes.size(), 2u);
+  const Plane& board = planes[0];
+  EXPECT_NEAR(AngleDiff(board.phi_rad, 0.0), 0.0, 0.5 * kDeg);
+  EXPECT_NEAR(board.theta_rad, 90 * kDeg, 0.5 * kDeg);
+  EXPECT_NEAR(board.distance_m, 1.75,
+              0.005);  // voxel centres of x in [1.74, 1.76]
+  EXPECT_GT(board.support_voxels, 2500u);
+  EXPECT_NEAR(board.extent.min().y(), -0.6, 0.03);
+  EXPECT_NEAR(board.extent.max().z(), 0.7, 0.03);
+  const Plane& floor = planes[1];
+  EXPECT_NEAR(floor.theta_rad, 180 * kDeg, 0.5 * kDeg);
+  EXPECT_NEAR(floor.distance_m, 0.41, 0.005);
+}
+
+TEST(Planes, TiltedPlaneAndRegion) {
+  octomap::OcTree tree(kRes);
+  const Eigen::Vector3d n = NormalFromAngles(30 * kDeg, 60 * kDeg);
+  const Eigen::Vector3d u = n.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d v = n.cross(u).normalized();
+  AddPlanePatch(&tree, 2.0 * n, u, v, 0.6, 0.6, 1.5f);
+  AddPlanePatch(&tree, {-2.0, 0.0, 0.0}, Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(), 0.5,
+                0.5, 1.5f);
+  tree.updateInnerOccupancy();
+  HoughOptions options;
+  options.region = Eigen::AlignedBox3d(Eigen::Vector3d(0, -5, -5), Eigen::Vector3d(5, 5, 5));
+  const auto planes = DetectPlanes(tree, options);
+  ASSERT_EQ(planes.size(), 1u);
+  EXPECT_NEAR(AngleDiff(planes[0].phi_rad, 30 * kDeg), 0.0, 1.0 * kDeg);
+  EXPECT_NEAR(planes[0].theta_rad, 60 * kDeg, 1.0 * kDeg);
+  EXPECT_NEAR(planes[0].distance_m, 2.0, 0.015);
+}
+
+TEST(Planes, EmptyTreeGivesNoPlanes) {
+  octomap::OcTree tree(kRes);
+  EXPECT_TRUE(DetectPlanes(tree).empty());
+}
+
+}  // namespace
+}  // namespace fusion

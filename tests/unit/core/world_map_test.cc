@@ -1,0 +1,273 @@
+#include "fusion/core/world_map.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "fusion/core/fusion_rules.h"
+#include "fusion/sim/scene.h"
+#include "fusion/sim/simulator.h"
+
+namespace fusion {
+namespace {
+
+constexpr double kRes = 0.04;
+
+struct Leaf {
+  octomap::OcTreeKey key;
+  float log_odds;
+};
+
+std::vector<Leaf> Leaves(const octomap::OcTree& tree) {
+  std::vector<Leaf> leaves;
+  for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+    // Log-odds 0 is unknown (a voxel whose last opinion went away keeps its
+    // node at 0).
+    if (it->getLogOdds() != 0.0f) leaves.push_back({it.getKey(), it->getLogOdds()});
+  }
+  std::sort(leaves.begin(), leaves.end(), [](const Leaf& a, const Leaf& b) {
+    return std::lexicographical_compare(a.key.k, a.key.k + 3, b.key.k, b.key.k + 3);
+  });
+  return leaves;
+}
+
+void ExpectSameLeaves(const octomap::OcTree& a, const octomap::OcTree& b) {
+  const auto la = Leaves(a);
+  const auto lb = Leaves(b);
+  ASSERT_EQ(la.size(), lb.size());
+  for (std::size_t i = 0; i < la.size(); ++i) {
+    ASSERT_EQ(la[i].key, lb[i].key) << i;
+    ASSERT_EQ(la[i].log_odds, lb[i].log_odds) << i;
+  }
+}
+
+class WorldMapTest : public ::testing::Test {
+ protected:
+  WorldMapTest()
+      : spec_(sim::WithTessellation(*SensorPreset("sr3000"), 44, 36)),
+        simulator_(sim::PaperBoardScene(), spec_, sim::SimOptions{}),
+        pose_(sim::ForwardLookingPose(Eigen::Vector3d::Zero())) {
+    options_.resolution_m = kRes;
+  }
+  sim::OrganizedCloud Frame() { return simulator_.Capture(pose_); }
+  static MapStatus Add(WorldMap* map, const std::string& id, const Eigen::Isometry3d& T,
+                       const sim::OrganizedCloud& c, bool* committed = nullptr) {
+    return map->Integrate(id, T, c.xyz.data(), c.size(), c.beyond_range, nullptr, committed);
+  }
+
+  SensorSpec spec_;
+  sim::RangeSimulator simulator_;
+  Eigen::Isometry3d pose_;
+  WorldMapOptions options_;
+};
+
+TEST_F(WorldMapTest, RejectsBadInput) {
+  WorldMap map(options_);
+  EXPECT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
+  EXPECT_EQ(map.AddSensor("sr", spec_), MapStatus::kDuplicateSensor);
+  const auto cloud = Frame();
+  EXPECT_EQ(Add(&map, "nope", pose_, cloud), MapStatus::kUnknownSensor);
+  Eigen::Isometry3d bad = pose_;
+  bad.translation().x() = std::nan("");
+  EXPECT_EQ(Add(&map, "sr", bad, cloud), MapStatus::kInvalidPose);
+  Eigen::Isometry3d scaled = pose_;
+  scaled.linear() *= 2.0;
+  EXPECT_EQ(Add(&map, "sr", scaled, cloud), MapStatus::kInvalidPose);
+  EXPECT_EQ(map.Integrate("sr", pose_, nullptr, 3), MapStatus::kInvalidArgument);
+  EXPECT_EQ(map.Integrate("sr", pose_, cloud.xyz.data(), cloud.size(), {1, 0}),
+            MapStatus::kInvalidArgument);
+  EXPECT_EQ(map.Render("nope"), MapStatus::kUnknownSensor);
+  EXPECT_EQ(map.Commit("nope"), MapStatus::kUnknownSensor);
+  EXPECT_EQ(map.version(), 0u);
+  EXPECT_EQ(map.tree().size(), 0u);
+  EXPECT_STREQ(MapStatusName(MapStatus::kInvalidPose), "invalid pose");
+}
+
+TEST_F(WorldMapTest, RenderingTheSamePeriodTwiceLeavesTheMapUnchanged) {
+  WorldMap map(options_);
+  ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
+  for (int i = 0; i < 5; ++i) ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  const std::uint64_t version = map.version();
+  EXPECT_EQ(version, 1u);
+  octomap::OcTree before(map.tree());
+  FuseStats stats;
+  ASSERT_EQ(map.Render("sr", &stats), MapStatus::kOk);
+  EXPECT_EQ(stats.voxels_changed, 0u);
+  EXPECT_EQ(map.version(), version);
+  ExpectSameLeaves(before, map.tree());
+  EXPECT_TRUE(map.ChangedKeysSince(version)->empty());
+}
+
+TEST_F(WorldMapTest, ReRenderReplacesThePeriodInsteadOfAddingIt) {
+  std::vector<sim::OrganizedCloud> frames;
+  for (int i = 0; i < 6; ++i) frames.push_back(Frame());
+  WorldMap incremental(options_);
+  WorldMap once(options_);
+  ASSERT_EQ(incremental.AddSensor("sr", spec_), MapStatus::kOk);
+  ASSERT_EQ(once.AddSensor("sr", spec_), MapStatus::kOk);
+  for (const auto& f : frames) {
+    ASSERT_EQ(Add(&incremental, "sr", pose_, f), MapStatus::kOk);
+    ASSERT_EQ(incremental.Render("sr"),
+              MapStatus::kOk);  // a render after every frame
+    ASSERT_EQ(Add(&once, "sr", pose_, f), MapStatus::kOk);
+  }
+  ASSERT_EQ(once.Render("sr"), MapStatus::kOk);
+  ExpectSameLeaves(incremental.tree(), once.tree());
+  EXPECT_EQ(incremental.Counters("sr")->renders, 6u);
+  EXPECT_EQ(incremental.Counters("sr")->commits, 0u);
+}
+
+TEST_F(WorldMapTest, MovingBeyondToleranceCommitsAndRestarts) {
+  WorldMap map(options_);
+  ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
+  bool committed = true;
+  ASSERT_EQ(Add(&map, "sr", pose_, Frame(), &committed), MapStatus::kOk);
+  EXPECT_FALSE(committed);
+  // Within tolerance (5 mm, 0.3 degrees): same period.
+  Eigen::Isometry3d nudged = pose_;
+  nudged.translation().y() += 0.005;
+  nudged.linear() = nudged.linear() * Eigen::AngleAxisd(0.005, Eigen::Vector3d::UnitY()).matrix();
+  ASSERT_EQ(Add(&map, "sr", nudged, Frame(), &committed), MapStatus::kOk);
+  EXPECT_FALSE(committed);
+  EXPECT_EQ(map.Counters("sr")->frames_in_period, 2u);
+  // Not yet rendered: the map is empty. The move commits (rendering the stale
+  // period first).
+  EXPECT_EQ(map.tree().size(), 0u);
+  Eigen::Isometry3d moved = pose_;
+  moved.translation().x() += 0.3;
+  ASSERT_EQ(Add(&map, "sr", moved, simulator_.Capture(moved), &committed), MapStatus::kOk);
+  EXPECT_TRUE(committed);
+  const auto counters = *map.Counters("sr");
+  EXPECT_EQ(counters.commits, 1u);
+  EXPECT_EQ(counters.pose_moves, 1u);
+  EXPECT_EQ(counters.frames_in_period, 1u);
+  EXPECT_EQ(counters.frames_integrated, 3u);
+  // The committed period is in the map; the board voxel seen from the first
+  // pose is occupied.
+  const auto board = map.Occupancy(Eigen::Vector3d(1.75, 0.01, 0.01));
+  ASSERT_TRUE(board.has_value());
+  EXPECT_GT(*board, 0.5);
+  const octomap::OcTree committed_only(map.tree());
+  // Rendering the new period adds to (does not replace) the committed one.
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  EXPECT_GT(*map.Occupancy(Eigen::Vector3d(1.75, 0.01, 0.01)), *board);
+  EXPECT_GE(map.tree().getNumLeafNodes(), committed_only.getNumLeafNodes());
+}
+
+TEST_F(WorldMapTest, CommitOnRequestKeepsTheMapAndRestartsTheGrid) {
+  WorldMap map(options_);
+  ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
+  for (int i = 0; i < 3; ++i) ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  const octomap::OcTree rendered(map.tree());
+  ASSERT_EQ(map.Commit("sr"), MapStatus::kOk);
+  ExpectSameLeaves(rendered,
+                   map.tree());  // committing changes nothing queries see
+  const BeamGrid* grid = map.beam_grid("sr");
+  ASSERT_NE(grid, nullptr);
+  for (std::size_t b = 0; b < grid->tessellation().beam_count(); ++b)
+    ASSERT_FALSE(grid->Touched(b));
+  // An empty re-render after the commit does not remove the committed evidence.
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  ExpectSameLeaves(rendered, map.tree());
+}
+
+TEST_F(WorldMapTest, ChangedKeysSinceAVersion) {
+  WorldMap map(options_);
+  ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
+  ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  const auto all = map.ChangedKeysSince(0);
+  ASSERT_TRUE(all.has_value());
+  EXPECT_EQ(all->size(), map.tree().getNumLeafNodes());
+  const std::uint64_t v1 = map.version();
+  ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  EXPECT_EQ(map.version(), v1 + 1);
+  const auto changed = map.ChangedKeysSince(v1);
+  ASSERT_TRUE(changed.has_value());
+  EXPECT_GT(changed->size(), 0u);
+  EXPECT_LE(changed->size(), map.tree().getNumLeafNodes());
+  for (const auto& key : *changed) ASSERT_NE(map.tree().search(key), nullptr);
+  EXPECT_TRUE(map.ChangedKeysSince(map.version())->empty());
+}
+
+TEST_F(WorldMapTest, ChangeHistoryIsBounded) {
+  options_.change_history_keys = 10;
+  WorldMap map(options_);
+  ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
+  for (int i = 0; i < 3; ++i) {
+    ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
+    ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  }
+  EXPECT_FALSE(map.ChangedKeysSince(0).has_value());  // too old: resynchronise
+  EXPECT_TRUE(map.ChangedKeysSince(map.version() - 1).has_value());
+}
+
+TEST_F(WorldMapTest, TwoSensorsFuseWithEq16) {
+  WorldMap map(options_);
+  ASSERT_EQ(map.AddSensor("a", spec_), MapStatus::kOk);
+  ASSERT_EQ(map.AddSensor("b", spec_), MapStatus::kOk);
+  // Sensor b stands 0.3 m closer and 0.2 m to the left; both see the board.
+  Eigen::Isometry3d pose_b = pose_;
+  pose_b.translation() = Eigen::Vector3d(0.3, 0.2, 0.0);
+  for (int i = 0; i < 3; ++i) {
+    ASSERT_EQ(Add(&map, "a", pose_, Frame()), MapStatus::kOk);
+    ASSERT_EQ(Add(&map, "b", pose_b, simulator_.Capture(pose_b)), MapStatus::kOk);
+  }
+  ASSERT_EQ(map.Render("a"), MapStatus::kOk);
+  ASSERT_EQ(map.Render("b"), MapStatus::kOk);
+  // Each sensor's opinion: its beam grid rendered alone. Every shared voxel
+  // must hold Eq. 16 of the two.
+  const LocalGrid la = RenderBeamGrid(*map.beam_grid("a"), pose_, map.options().render);
+  const LocalGrid lb = RenderBeamGrid(*map.beam_grid("b"), pose_b, map.options().render);
+  std::size_t shared = 0;
+  std::size_t disagreeing = 0;
+  la.ForEachLogOdds([&](const octomap::OcTreeKey& key, float l_a) {
+    const auto l_b = lb.LogOddsOf(key);
+    if (!l_b) return;
+    ++shared;
+    const double p_a = ProbabilityFromLogOdds(l_a);
+    const double p_b = ProbabilityFromLogOdds(*l_b);
+    const double expected = std::clamp(FuseIndependentOpinionPool(p_a, p_b), 0.001, 0.999);
+    const octomap::OcTreeNode* node = map.tree().search(key);
+    ASSERT_NE(node, nullptr);
+    EXPECT_NEAR(node->getOccupancy(), expected, 1e-4);
+    if ((p_a > 0.6 && p_b < 0.4) || (p_a < 0.4 && p_b > 0.6)) ++disagreeing;
+  });
+  EXPECT_GT(shared, 1000u);
+  EXPECT_GT(disagreeing,
+            0u);  // one sees occupied, the other free: Eq. 16 decides
+}
+
+TEST_F(WorldMapTest, MaxAndDeMorganRules) {
+  for (FusionRule rule : {FusionRule::kMax, FusionRule::kDeMorgan}) {
+    options_.rule = rule;
+    WorldMap map(options_);
+    ASSERT_EQ(map.AddSensor("a", spec_), MapStatus::kOk);
+    ASSERT_EQ(map.AddSensor("b", spec_), MapStatus::kOk);
+    Eigen::Isometry3d pose_b = pose_;
+    pose_b.translation() = Eigen::Vector3d(0.0, 0.05, 0.0);
+    ASSERT_EQ(Add(&map, "a", pose_, Frame()), MapStatus::kOk);
+    ASSERT_EQ(Add(&map, "b", pose_b, simulator_.Capture(pose_b)), MapStatus::kOk);
+    ASSERT_EQ(map.Render("a"), MapStatus::kOk);
+    ASSERT_EQ(map.Render("b"), MapStatus::kOk);
+    const LocalGrid la = RenderBeamGrid(*map.beam_grid("a"), pose_, map.options().render);
+    const LocalGrid lb = RenderBeamGrid(*map.beam_grid("b"), pose_b, map.options().render);
+    std::size_t checked = 0;
+    la.ForEachLogOdds([&](const octomap::OcTreeKey& key, float l_a) {
+      const auto l_b = lb.LogOddsOf(key);
+      if (!l_b || checked > 2000) return;
+      ++checked;
+      const double expected = std::clamp(
+          Fuse(rule, ProbabilityFromLogOdds(l_a), ProbabilityFromLogOdds(*l_b)), 0.001, 0.999);
+      EXPECT_NEAR(map.tree().search(key)->getOccupancy(), expected, 1e-4);
+    });
+    EXPECT_GT(checked, 100u);
+  }
+}
+
+}  // namespace
+}  // namespace fusion
