@@ -1,11 +1,15 @@
 #include "fusion/service/config.h"
 
-#include <fstream>
-#include <sstream>
-
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
+
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "fusion/service/conversions.h"
 
 namespace fusion::service {
 namespace {
@@ -24,7 +28,82 @@ class ErrorCollector : public google::protobuf::io::ErrorCollector {
 };
 
 bool EndsWith(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+bool Fail(std::string* error, const std::string& field, const std::string& message) {
+  *error = field + ": " + message;
+  return false;
+}
+
+bool ValidateSensors(const fusion::v1::ServiceConfig& config, std::string* error) {
+  std::set<std::string> ids;
+  for (int i = 0; i < config.sensors_size(); ++i) {
+    const auto& sensor = config.sensors(i);
+    const std::string field = "sensors[" + std::to_string(i) + "]";
+    std::string detail;
+    if (!SensorSetupFromConfig(sensor, &detail)) {
+      *error = field + "." + detail;
+      return false;
+    }
+    if (!ids.insert(sensor.id()).second) {
+      return Fail(error, field + ".id", "'" + sensor.id() + "' appears twice");
+    }
+  }
+  return true;
+}
+
+bool ValidateMap(const fusion::v1::MapConfig& map, std::string* error) {
+  std::string detail;
+  if (!WorldMapOptionsFromConfig(map, &detail)) {
+    *error = "map." + detail;
+    return false;
+  }
+  if (map.render_interval_ms() == 0 || map.render_interval_ms() > 600'000) {
+    return Fail(error, "map.render_interval_ms",
+                std::to_string(map.render_interval_ms()) + " is outside 1..600000");
+  }
+  const auto in_unit = [](double p) { return p > 0.0 && p < 1.0; };
+  if (!in_unit(map.occupied_threshold())) {
+    return Fail(error, "map.occupied_threshold", "must lie in (0, 1)");
+  }
+  if (!in_unit(map.free_threshold()) || map.free_threshold() > map.occupied_threshold()) {
+    return Fail(error, "map.free_threshold", "must lie in (0, occupied_threshold]");
+  }
+  return true;
+}
+
+bool ValidateIngest(const fusion::v1::IngestConfig& ingest, std::string* error) {
+  if (ingest.reliability() != "best_effort" && ingest.reliability() != "reliable") {
+    return Fail(error, "ingest.reliability",
+                "'" + ingest.reliability() + "' is not best_effort or reliable");
+  }
+  if (ingest.max_points() == 0 || ingest.max_points() > 50'000'000) {
+    return Fail(error, "ingest.max_points", "must lie in 1..50000000");
+  }
+  if (!(ingest.quaternion_tolerance() > 0.0 && ingest.quaternion_tolerance() < 0.5)) {
+    return Fail(error, "ingest.quaternion_tolerance", "must lie in (0, 0.5)");
+  }
+  if (!(ingest.max_abs_translation_m() > 0.0 && std::isfinite(ingest.max_abs_translation_m()))) {
+    return Fail(error, "ingest.max_abs_translation_m", "must be positive and finite");
+  }
+  return true;
+}
+
+bool ValidateLimits(const fusion::v1::QueryLimits& limits, std::string* error) {
+  if (limits.max_points_per_query() == 0) {
+    return Fail(error, "limits.max_points_per_query", "must be positive");
+  }
+  if (limits.max_voxels_per_page() == 0 || limits.max_voxels_per_page() > 1'000'000) {
+    return Fail(error, "limits.max_voxels_per_page", "must lie in 1..1000000");
+  }
+  if (limits.max_box_voxels() == 0) return Fail(error, "limits.max_box_voxels", "must be positive");
+  if (limits.snapshot_chunk_bytes() < 1024 || limits.snapshot_chunk_bytes() > (3u << 20)) {
+    return Fail(error, "limits.snapshot_chunk_bytes",
+                "must lie in 1024..3145728 (gRPC's default message limit is 4 MiB)");
+  }
+  return true;
 }
 
 }  // namespace
@@ -35,6 +114,26 @@ fusion::v1::ServiceConfig DefaultConfig() {
   config.set_dds_domain(0);
   config.set_dds_topic("fusion/points");
   config.set_log_level("info");
+  auto* map = config.mutable_map();
+  map->set_resolution_m(0.05);
+  map->set_fusion_rule("independent_opinion_pool");
+  map->set_pose_tolerance_m(0.01);
+  map->set_pose_tolerance_deg(1.0);
+  map->set_render_interval_ms(200);
+  map->set_occupied_threshold(0.5);
+  map->set_free_threshold(0.5);
+  map->set_beam_cell_size_m(0.002);
+  auto* ingest = config.mutable_ingest();
+  ingest->set_reliability("best_effort");
+  ingest->set_max_points(4'000'000);
+  ingest->set_quaternion_tolerance(1e-3);
+  ingest->set_max_abs_translation_m(1e5);
+  config.mutable_persistence()->set_interval_s(30);
+  auto* limits = config.mutable_limits();
+  limits->set_max_points_per_query(100'000);
+  limits->set_max_voxels_per_page(10'000);
+  limits->set_max_box_voxels(100'000'000);
+  limits->set_snapshot_chunk_bytes(1 << 20);
   return config;
 }
 
@@ -81,7 +180,7 @@ bool ValidateConfig(const fusion::v1::ServiceConfig& config, std::string* error)
     *error = "dds_topic: must not be empty";
     return false;
   }
-  static const char* const kLevels[] = {"trace", "debug", "info", "warn",
+  static const char* const kLevels[] = {"trace", "debug",    "info", "warn",
                                         "error", "critical", "off"};
   bool level_ok = false;
   for (const char* level : kLevels) level_ok = level_ok || config.log_level() == level;
@@ -90,6 +189,19 @@ bool ValidateConfig(const fusion::v1::ServiceConfig& config, std::string* error)
              "' is not one of trace, debug, info, warn, error, critical, off";
     return false;
   }
+  return ValidateSensors(config, error) && ValidateMap(config.map(), error) &&
+         ValidateIngest(config.ingest(), error) && ValidateLimits(config.limits(), error);
+}
+
+bool ParseSensorFlag(const std::string& value, fusion::v1::SensorConfig* sensor,
+                     std::string* error) {
+  const auto eq = value.find('=');
+  if (eq == std::string::npos || eq == 0 || eq + 1 == value.size()) {
+    *error = "--sensor: '" + value + "' is not ID=PRESET";
+    return false;
+  }
+  sensor->set_id(value.substr(0, eq));
+  sensor->set_preset(value.substr(eq + 1));
   return true;
 }
 

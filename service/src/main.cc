@@ -1,10 +1,10 @@
 // fusiond: the forward-model occupancy fusion service.
+#include <spdlog/spdlog.h>
+
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
-
-#include <spdlog/spdlog.h>
 
 #include "fusion/service/config.h"
 #include "fusion/service/server.h"
@@ -20,8 +20,17 @@ Usage: fusiond [options]
   --config FILE       configuration (.pbtxt protobuf text format, or .json)
   --listen HOST:PORT  gRPC listen address (default 127.0.0.1:0: the OS picks the port)
   --dds-domain N      DDS domain id (default 0)
+  --dds-topic NAME    DDS topic of the point clouds (default fusion/points)
   --log-level LEVEL   trace, debug, info, warn, error, critical, off (default info)
+  --sensor ID=PRESET  accept clouds of sensor ID, modelled with PRESET (sr3000, stoc);
+                      repeatable, added to the configuration file's sensors
+  --resolution M      map voxel size in metres (default 0.05)
+  --render-interval-ms MS  render cadence (default 200)
+  --snapshot FILE     snapshot file (.ot): loaded at start, written periodically and on exit
+  --snapshot-interval S    periodic snapshot interval in seconds, 0 = only on exit (default 30)
   --help              this text
+
+A bad configuration is refused with a message naming the field; see docs/service.md.
 
 On start it prints "fusiond listening on HOST:PORT". SIGINT or SIGTERM stops it cleanly.
 Unless CYCLONEDDS_URI is set, DDS runs with an embedded configuration on 127.0.0.1.
@@ -30,6 +39,19 @@ Unless CYCLONEDDS_URI is set, DDS runs with an embedded configuration on 127.0.0
 int Fail(const std::string& message) {
   std::fprintf(stderr, "fusiond: %s\n", message.c_str());
   return 2;
+}
+
+bool ParseDouble(const char* text, double* value) {
+  char* end = nullptr;
+  *value = std::strtod(text, &end);
+  return end != text && *end == '\0';
+}
+
+bool ParseUnsigned(const char* text, unsigned long* value) {
+  char* end = nullptr;
+  if (*text == '-') return false;
+  *value = std::strtoul(text, &end, 10);
+  return end != text && *end == '\0';
 }
 
 }  // namespace
@@ -55,12 +77,37 @@ int main(int argc, char** argv) {
     } else if (arg == "--listen" && has_value) {
       config.set_listen_address(argv[++i]);
     } else if (arg == "--dds-domain" && has_value) {
-      char* end = nullptr;
-      const long domain = std::strtol(argv[++i], &end, 10);
-      if (*end != '\0' || domain < 0) return Fail("--dds-domain: not a domain id: " + std::string(argv[i]));
+      unsigned long domain = 0;
+      if (!ParseUnsigned(argv[++i], &domain) || domain > 0xffffffffUL) {
+        return Fail("--dds-domain: not a domain id: " + std::string(argv[i]));
+      }
       config.set_dds_domain(static_cast<unsigned>(domain));
+    } else if (arg == "--dds-topic" && has_value) {
+      config.set_dds_topic(argv[++i]);
     } else if (arg == "--log-level" && has_value) {
       config.set_log_level(argv[++i]);
+    } else if (arg == "--sensor" && has_value) {
+      if (!fusion::service::ParseSensorFlag(argv[++i], config.add_sensors(), &error)) {
+        return Fail(error);
+      }
+    } else if (arg == "--resolution" && has_value) {
+      double resolution = 0.0;
+      if (!ParseDouble(argv[++i], &resolution)) return Fail("--resolution: not a number");
+      config.mutable_map()->set_resolution_m(resolution);
+    } else if (arg == "--render-interval-ms" && has_value) {
+      unsigned long ms = 0;
+      if (!ParseUnsigned(argv[++i], &ms) || ms > 600000) {
+        return Fail("--render-interval-ms: not a number of milliseconds");
+      }
+      config.mutable_map()->set_render_interval_ms(static_cast<unsigned>(ms));
+    } else if (arg == "--snapshot" && has_value) {
+      config.mutable_persistence()->set_path(argv[++i]);
+    } else if (arg == "--snapshot-interval" && has_value) {
+      unsigned long s = 0;
+      if (!ParseUnsigned(argv[++i], &s) || s > 86400) {
+        return Fail("--snapshot-interval: not a number of seconds");
+      }
+      config.mutable_persistence()->set_interval_s(static_cast<unsigned>(s));
     } else {
       return Fail("unknown or incomplete option '" + arg + "' (see --help)");
     }

@@ -1,32 +1,29 @@
 #include "fusion/service/server.h"
 
-#include <atomic>
-
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <spdlog/spdlog.h>
 
+#include "fusion/service/conversions.h"
 #include "fusion/service/dds_domain.h"
-#include "fusion/v1/map_service.grpc.pb.h"
+#include "fusion/service/dds_ingest.h"
+#include "fusion/service/fusion_worker.h"
+#include "fusion/service/ingest_queues.h"
+#include "fusion/service/map_service.h"
+#include "fusion/service/map_snapshot.h"
+#include "fusion/service/persistence.h"
+#include "fusion/service/persister.h"
 
 namespace fusion::service {
 
-class FusionServer::MapService final : public fusion::v1::FusionMap::CallbackService {
- public:
-  MapService() : start_(std::chrono::steady_clock::now()) {}
-
-  grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context,
-                                     const fusion::v1::GetStatsRequest* /*request*/,
-                                     fusion::v1::Stats* reply) override {
-    reply->set_uptime_s(
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count());
-    auto* reactor = context->DefaultReactor();
-    reactor->Finish(grpc::Status::OK);
-    return reactor;
-  }
-
- private:
-  std::chrono::steady_clock::time_point start_;
+struct FusionServer::Parts {
+  ServiceState state;
+  std::unique_ptr<IngestQueues> queues;
+  SnapshotHub hub;
+  std::unique_ptr<FusionWorker> worker;
+  std::unique_ptr<Persister> persister;
+  std::unique_ptr<DdsIngest> ingest;
+  std::unique_ptr<MapService> service;
 };
 
 FusionServer::FusionServer(fusion::v1::ServiceConfig config) : config_(std::move(config)) {}
@@ -34,15 +31,86 @@ FusionServer::FusionServer(fusion::v1::ServiceConfig config) : config_(std::move
 FusionServer::~FusionServer() { Shutdown(); }
 
 bool FusionServer::Start(std::string* error) {
+  parts_ = std::make_unique<Parts>();
+  Parts& p = *parts_;
+  p.state.config = config_;
+  std::vector<std::pair<std::string, std::size_t>> queue_specs;
+  for (int i = 0; i < config_.sensors_size(); ++i) {
+    std::string detail;
+    auto setup = SensorSetupFromConfig(config_.sensors(i), &detail);
+    if (!setup) {
+      *error = "sensors[" + std::to_string(i) + "]." + detail;
+      return false;
+    }
+    queue_specs.emplace_back(setup->id, setup->queue_depth);
+    p.state.sensors.push_back(std::move(*setup));
+  }
+  std::string detail;
+  const auto map_options = WorldMapOptionsFromConfig(config_.map(), &detail);
+  if (!map_options) {
+    *error = "map." + detail;
+    return false;
+  }
+  p.state.thresholds = ThresholdsFromConfig(config_.map());
+  p.queues = std::make_unique<IngestQueues>(queue_specs);
+  p.state.queues = p.queues.get();
+  p.state.hub = &p.hub;
+
+  // The last snapshot, if any: loaded, or set aside when corrupt.
+  const auto& persistence = config_.persistence();
+  std::unique_ptr<octomap::OcTree> base;
+  if (!persistence.path().empty() &&
+      (!persistence.has_load_on_start() || persistence.load_on_start())) {
+    std::string message;
+    switch (LoadSnapshotFile(persistence.path(), map_options->resolution_m, &base, &message)) {
+      case LoadStatus::kLoaded:
+        spdlog::info("snapshot: loaded {} ({} nodes)", persistence.path(), base->size());
+        break;
+      case LoadStatus::kMissing:
+        spdlog::info("snapshot: {} does not exist yet; starting with an empty map",
+                     persistence.path());
+        break;
+      case LoadStatus::kCorrupt:
+        spdlog::error("snapshot: corrupt, not loaded: {}; starting with an empty map", message);
+        break;
+      case LoadStatus::kError:
+        *error = "snapshot: " + message;
+        return false;
+    }
+  }
+
+  WorkerOptions worker_options;
+  worker_options.map = *map_options;
+  worker_options.thresholds = p.state.thresholds;
+  worker_options.render_interval = std::chrono::milliseconds(config_.map().render_interval_ms());
+  p.worker =
+      std::make_unique<FusionWorker>(worker_options, p.state.sensors, p.queues.get(), &p.hub);
+  const bool loaded = base != nullptr;
+  if (!p.worker->Start(std::move(base), error)) return false;
+  p.state.worker = p.worker.get();
+  p.persister = std::make_unique<Persister>(persistence.path(),
+                                            std::chrono::seconds(persistence.interval_s()), &p.hub);
+  if (loaded) p.persister->set_saved_version(p.hub.Current()->version);
+  p.persister->Start();
+  p.state.persister = p.persister.get();
+
   participant_ = CreateParticipant(config_.dds_domain(), error);
   if (participant_ < 0) return false;
+  DdsIngestOptions ingest_options;
+  ingest_options.topic = config_.dds_topic();
+  ingest_options.reliable = config_.ingest().reliability() == "reliable";
+  ingest_options.limits.max_points = config_.ingest().max_points();
+  ingest_options.limits.quaternion_tolerance = config_.ingest().quaternion_tolerance();
+  ingest_options.limits.max_abs_translation_m = config_.ingest().max_abs_translation_m();
+  p.ingest = std::make_unique<DdsIngest>(p.queues.get(), ingest_options);
+  if (!p.ingest->Start(participant_, error)) return false;
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
-  map_service_ = std::make_unique<MapService>();
+  p.service = std::make_unique<MapService>(&p.state);
   grpc::ServerBuilder builder;
   builder.AddListeningPort(config_.listen_address(), grpc::InsecureServerCredentials(), &port_);
-  builder.RegisterService(map_service_.get());
+  builder.RegisterService(p.service.get());
   server_ = builder.BuildAndStart();
   if (!server_ || port_ == 0) {
     *error = "cannot listen on '" + config_.listen_address() + "'";
@@ -52,14 +120,33 @@ bool FusionServer::Start(std::string* error) {
   auto* health = server_->GetHealthCheckService();
   health->SetServingStatus(true);
   health->SetServingStatus(fusion::v1::FusionMap::service_full_name(), true);
+  spdlog::info("{} sensor(s) configured; map resolution {} m, rule {}", p.state.sensors.size(),
+               map_options->resolution_m, config_.map().fusion_rule());
   return true;
 }
 
 void FusionServer::Shutdown(std::chrono::milliseconds deadline) {
+  if (stopped_ || !parts_) return;
+  stopped_ = true;
+  Parts& p = *parts_;
+  p.state.shutting_down = true;
+  if (server_) server_->GetHealthCheckService()->SetServingStatus(false);
+  p.hub.Close();  // ends the update streams
   if (server_) {
-    server_->GetHealthCheckService()->SetServingStatus(false);
     server_->Shutdown(std::chrono::system_clock::now() + deadline);
     server_.reset();
+  }
+  if (p.ingest) p.ingest->Stop();
+  if (p.worker) p.worker->Stop();  // drains the queues, renders, publishes
+  if (p.persister) {
+    p.persister->Stop();
+    if (p.persister->enabled()) {
+      std::uint64_t version = 0, bytes = 0;
+      std::string error;
+      if (!p.persister->SaveNow(&version, &bytes, &error)) {
+        spdlog::error("final snapshot not written: {}", error);
+      }
+    }
   }
   if (participant_ > 0) {
     dds_delete(participant_);

@@ -1,14 +1,17 @@
 // Protobuf round trips of the configuration and the errors a bad file gets.
-#include <cstdio>
-#include <fstream>
-#include <string>
-
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
 #include <google/protobuf/util/message_differencer.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
 #include "fusion/service/config.h"
+#include "fusion/service/conversions.h"
 
 namespace fusion::service {
 namespace {
@@ -68,6 +71,73 @@ TEST(ConfigProtoTest, BadFilesAreRefusedWithTheFieldNamed) {
 
   EXPECT_FALSE(LoadConfigFile("/nonexistent/fusiond.pbtxt", &config, &error));
   EXPECT_NE(error.find("cannot open"), std::string::npos) << error;
+}
+
+// Each bad field of a configuration is refused with the field's path in the message.
+TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
+  const std::pair<const char*, const char*> cases[] = {
+      {"sensors { preset: \"sr3000\" }", "sensors[0].id"},
+      {"sensors { id: \"a\" preset: \"kinect\" }", "sensors[0].preset"},
+      {"sensors { id: \"a\" preset: \"sr3000\" } sensors { id: \"a\" preset: \"stoc\" }",
+       "sensors[1].id"},
+      {"sensors { id: \"a\" preset: \"sr3000\" fov_h_deg: 0 }", "sensors[0].fov_h_deg"},
+      {"sensors { id: \"a\" preset: \"sr3000\" r_max_m: 0.1 }", "sensors[0].r_max_m"},
+      {"sensors { id: \"a\" preset: \"sr3000\" cols: 100000 rows: 100000 }", "sensors[0].cols"},
+      {"sensors { id: \"a\" r_min_m: 0.1 r_max_m: 5 fov_h_deg: 40 fov_v_deg: 30 cols: 10 }",
+       "sensors[0].rows"},
+      {"sensors { id: \"a\" preset: \"sr3000\" mount { qw: 2 } }", "sensors[0].mount"},
+      {"sensors { id: \"a\" preset: \"sr3000\" model: \"magic\" }", "sensors[0].model"},
+      {"sensors { id: \"a\" preset: \"sr3000\" queue_depth: 0 }", "sensors[0].queue_depth"},
+      {"map { resolution_m: 100 }", "map.resolution_m"},
+      {"map { fusion_rule: \"average\" }", "map.fusion_rule"},
+      {"map { pose_tolerance_deg: 500 }", "map.pose_tolerance_deg"},
+      {"map { free_threshold: 0.7 occupied_threshold: 0.6 }", "map.free_threshold"},
+      {"map { beam_cell_size_m: 5 }", "map.beam_cell_size_m"},
+      {"ingest { reliability: \"sometimes\" }", "ingest.reliability"},
+      {"ingest { quaternion_tolerance: 0.9 }", "ingest.quaternion_tolerance"},
+      {"limits { snapshot_chunk_bytes: 100000000 }", "limits.snapshot_chunk_bytes"},
+  };
+  for (const auto& [text, field] : cases) {
+    auto config = DefaultConfig();
+    std::string error;
+    EXPECT_FALSE(LoadConfigFile(WriteTemp("bad_field.pbtxt", text), &config, &error)) << text;
+    EXPECT_EQ(error.rfind(field, 0), 0u) << text << " gave: " << error;
+  }
+}
+
+TEST(ConfigProtoTest, FullExampleLoadsAndSensorsBecomeCoreSpecs) {
+  // This file is tests/unit/service/config_proto_test.cc; the example is docs/ at the root.
+  const std::string example =
+      (std::filesystem::path(__FILE__).parent_path() / "../../../docs/fusiond.example.pbtxt")
+          .string();
+  auto config = DefaultConfig();
+  std::string error;
+  ASSERT_TRUE(LoadConfigFile(example, &config, &error)) << error;
+  ASSERT_EQ(config.sensors_size(), 3);
+  auto sr = SensorSetupFromConfig(config.sensors(0), &error);
+  ASSERT_TRUE(sr) << error;
+  EXPECT_EQ(sr->spec.cols, 176);
+  auto custom = SensorSetupFromConfig(config.sensors(2), &error);
+  ASSERT_TRUE(custom) << error;
+  EXPECT_NEAR(custom->spec.fov_h_rad, 270.0 * M_PI / 180.0, 1e-9);
+  EXPECT_EQ(custom->spec.model, ForwardModelKind::kClassicBeam);
+  // The stereo camera is mounted 25 mm left of and 80 mm below the SR-3000's frame.
+  auto stereo = SensorSetupFromConfig(config.sensors(1), &error);
+  ASSERT_TRUE(stereo) << error;
+  EXPECT_NEAR(stereo->T_published_sensor.translation().y(), 0.08, 1e-12);
+  auto options = WorldMapOptionsFromConfig(config.map(), &error);
+  ASSERT_TRUE(options) << error;
+  EXPECT_EQ(options->rule, FusionRule::kIndependentOpinionPool);
+}
+
+TEST(ConfigProtoTest, SensorFlagAddsAPresetSensor) {
+  fusion::v1::SensorConfig sensor;
+  std::string error;
+  ASSERT_TRUE(ParseSensorFlag("front=sr3000", &sensor, &error));
+  EXPECT_EQ(sensor.id(), "front");
+  EXPECT_EQ(sensor.preset(), "sr3000");
+  EXPECT_FALSE(ParseSensorFlag("front", &sensor, &error));
+  EXPECT_FALSE(ParseSensorFlag("=sr3000", &sensor, &error));
 }
 
 }  // namespace

@@ -7,15 +7,21 @@
 
 namespace fusion::service {
 
-// The configuration a user gets with no file: loopback, OS-chosen port, private domain 0.
+// The configuration a user gets with no file: loopback, OS-chosen port, private domain 0,
+// no sensors, no persistence.
 [[nodiscard]] fusion::v1::ServiceConfig DefaultConfig();
 
 // Loads a configuration file (".json" as JSON, anything else as protobuf text format) over
-// the defaults. Returns false with *error naming the file, line and field on failure.
-bool LoadConfigFile(const std::string& path, fusion::v1::ServiceConfig* config,
-                    std::string* error);
+// the defaults (scalars set in the file replace the defaults, sensors are appended).
+// Returns false with *error naming the file, line and field on failure.
+bool LoadConfigFile(const std::string& path, fusion::v1::ServiceConfig* config, std::string* error);
 
-// Checks every field; returns false with *error naming the offending field.
+// Checks every field; returns false with *error naming the offending field
+// (e.g. "sensors[1].fov_h_deg: ...").
 bool ValidateConfig(const fusion::v1::ServiceConfig& config, std::string* error);
+
+// Parses a "--sensor ID=PRESET" command-line value into a sensor entry.
+bool ParseSensorFlag(const std::string& value, fusion::v1::SensorConfig* sensor,
+                     std::string* error);
 
 }  // namespace fusion::service

@@ -2,10 +2,10 @@
 // keeps traffic on loopback unless CYCLONEDDS_URI names another one.
 #pragma once
 
+#include <dds/dds.h>
+
 #include <cstdint>
 #include <string>
-
-#include <dds/dds.h>
 
 namespace fusion::service {
 

@@ -1,11 +1,12 @@
-// fusiond's gRPC front: the FusionMap service, the standard health service and reflection.
+// fusiond as a whole: configuration -> DDS ingest -> bounded queues -> fusion worker ->
+// published snapshots -> gRPC (FusionMap, health, reflection), plus persistence.
 #pragma once
+
+#include <grpcpp/grpcpp.h>
 
 #include <chrono>
 #include <memory>
 #include <string>
-
-#include <grpcpp/grpcpp.h>
 
 #include "fusion/v1/config.pb.h"
 
@@ -13,25 +14,29 @@ namespace fusion::service {
 
 class FusionServer {
  public:
+  // The configuration must have passed ValidateConfig.
   explicit FusionServer(fusion::v1::ServiceConfig config);
   ~FusionServer();
   FusionServer(const FusionServer&) = delete;
   FusionServer& operator=(const FusionServer&) = delete;
 
-  // Joins DDS and starts listening. Returns false with *error set on failure.
+  // Loads the last snapshot, starts the worker, joins DDS and starts listening. Returns false
+  // with *error set on failure (a corrupt snapshot is set aside and logged, not an error).
   bool Start(std::string* error);
   // Port actually bound (useful with port 0).
   [[nodiscard]] int port() const { return port_; }
-  // Stops accepting calls, lets running ones finish within the deadline, leaves DDS.
+  // Stops serving (streams end, running calls get the deadline), leaves DDS, integrates what
+  // is queued, writes the final snapshot.
   void Shutdown(std::chrono::milliseconds deadline = std::chrono::milliseconds(2000));
 
  private:
-  class MapService;
+  struct Parts;
   fusion::v1::ServiceConfig config_;
-  std::unique_ptr<MapService> map_service_;
+  std::unique_ptr<Parts> parts_;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;
   int participant_ = 0;
+  bool stopped_ = false;
 };
 
 }  // namespace fusion::service

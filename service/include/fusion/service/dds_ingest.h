@@ -1,0 +1,55 @@
+// DDS ingest: a reader on the point-cloud topic, served by its own thread, that validates every
+// sample, counts and logs (rate-limited) the rejected ones and queues the rest.
+#pragma once
+
+#include <dds/dds.h>
+
+#include <atomic>
+#include <chrono>
+#include <string>
+#include <thread>
+
+#include "fusion/service/ingest_queues.h"
+#include "fusion/service/validation.h"
+
+namespace fusion::service {
+
+struct DdsIngestOptions {
+  std::string topic = "fusion/points";
+  bool reliable = false;  // default: best effort (sensor data)
+  IngestLimits limits;
+  // At most one log line per rejection reason per this interval (the rest are counted).
+  std::chrono::milliseconds log_interval{1000};
+};
+
+class DdsIngest {
+ public:
+  DdsIngest(IngestQueues* queues, DdsIngestOptions options);
+  ~DdsIngest();
+  DdsIngest(const DdsIngest&) = delete;
+  DdsIngest& operator=(const DdsIngest&) = delete;
+
+  // Creates the topic and reader in `participant` and starts the thread.
+  bool Start(dds_entity_t participant, std::string* error);
+  // Stops the thread and deletes the reader (the participant stays).
+  void Stop();
+
+ private:
+  void Loop();
+  void Handle(const fusion_dds_PointCloud& sample);
+  void LogRejection(RejectReason reason, const std::string& sensor_id, const std::string& detail);
+
+  IngestQueues* queues_;
+  DdsIngestOptions options_;
+  dds_entity_t topic_ = 0;
+  dds_entity_t reader_ = 0;
+  dds_entity_t waitset_ = 0;
+  dds_entity_t read_condition_ = 0;
+  dds_entity_t stop_condition_ = 0;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+  std::array<std::chrono::steady_clock::time_point, kRejectReasonCount> last_log_{};
+  std::array<std::uint64_t, kRejectReasonCount> suppressed_{};
+};
+
+}  // namespace fusion::service

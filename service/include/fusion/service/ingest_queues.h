@@ -1,0 +1,78 @@
+// Bounded per-sensor queues between the DDS ingest thread and the fusion worker, with the
+// ingest counters every layer updates. Newest wins: a full queue drops its oldest cloud.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "fusion/service/cloud.h"
+
+namespace fusion::service {
+
+struct RejectCounters {
+  std::array<std::atomic<std::uint64_t>, kRejectReasonCount> by_reason{};
+  void Count(RejectReason reason) {
+    by_reason[static_cast<std::size_t>(reason)].fetch_add(1, std::memory_order_relaxed);
+  }
+  [[nodiscard]] std::uint64_t Total() const;
+};
+
+struct SensorCountersAtomic {
+  std::atomic<std::uint64_t> received{0};  // valid clouds queued
+  std::atomic<std::uint64_t> dropped{0};   // replaced by a newer cloud before integration
+  std::atomic<std::uint64_t> integrated{0};
+  std::atomic<std::uint64_t> points_updated{0};
+  std::atomic<std::uint64_t> points_beyond_range{0};
+  std::atomic<std::uint64_t> points_missing{0};
+  std::atomic<std::uint64_t> points_rejected{0};
+  std::atomic<std::uint64_t> last_sequence_number{0};
+  std::atomic<std::uint64_t> memory_bytes{0};
+  RejectCounters rejected;
+};
+
+class IngestQueues {
+ public:
+  // (sensor id, queue depth >= 1) for every configured sensor.
+  explicit IngestQueues(const std::vector<std::pair<std::string, std::size_t>>& sensors);
+
+  [[nodiscard]] bool Known(const std::string& sensor_id) const;
+  [[nodiscard]] std::vector<std::string> SensorIds() const;
+  // nullptr for an unknown id.
+  [[nodiscard]] SensorCountersAtomic* counters(const std::string& sensor_id);
+  [[nodiscard]] const SensorCountersAtomic* counters(const std::string& sensor_id) const;
+  // Rejections of every sample, whatever its sensor id (known or not).
+  [[nodiscard]] RejectCounters& all_rejected() { return all_rejected_; }
+  [[nodiscard]] const RejectCounters& all_rejected() const { return all_rejected_; }
+  void CountRejected(const std::string& sensor_id, RejectReason reason);
+
+  // Queues a validated cloud of a known sensor; drops the oldest if the queue is full.
+  void Push(Cloud cloud);
+  // Moves every queued cloud into *out (oldest first per sensor). Waits until there is one,
+  // Wake() is called or `until` passes. Returns true if *out is non-empty.
+  bool PopAll(std::vector<Cloud>* out, std::chrono::steady_clock::time_point until);
+  void Wake();
+  [[nodiscard]] std::size_t Pending() const;
+
+ private:
+  struct Slot {
+    std::size_t depth = 1;
+    std::deque<Cloud> queue;
+    SensorCountersAtomic counters;
+  };
+  std::map<std::string, std::unique_ptr<Slot>> slots_;  // fixed after construction
+  RejectCounters all_rejected_;
+  mutable std::mutex mutex_;
+  std::condition_variable cv_;
+  bool woken_ = false;
+};
+
+}  // namespace fusion::service

@@ -1,0 +1,35 @@
+// Map snapshots on disk in OctoMap's .ot format: written atomically (temporary file, fsync,
+// rename, fsync of the directory), loaded at start, corrupt files set aside, never
+// overwritten silently.
+#pragma once
+
+#include <octomap/OcTree.h>
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+namespace fusion::service {
+
+// Writes `tree` to `path` atomically. *bytes receives the file size.
+bool WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path, std::uint64_t* bytes,
+                       std::string* error);
+
+enum class LoadStatus {
+  kLoaded,
+  kMissing,  // no file: start empty
+  kCorrupt,  // unreadable or inconsistent: renamed to <path>.corrupt-<UTC time>
+  kError,    // readable but unusable (e.g. another resolution), or cannot set aside: refuse
+};
+
+// Loads a snapshot written by WriteSnapshotFile (or any OcTree .ot file). Checks that the
+// declared node count matches the data before parsing, so a truncated file is detected
+// instead of being half-loaded. *message explains anything but kLoaded / kMissing.
+LoadStatus LoadSnapshotFile(const std::string& path, double expected_resolution_m,
+                            std::unique_ptr<octomap::OcTree>* tree, std::string* message);
+
+// Serialises a tree as .ot (full, log-odds) or .bt (maximum likelihood) bytes.
+std::string SerializeOt(const octomap::OcTree& tree);
+std::string SerializeBt(const octomap::OcTree& tree);
+
+}  // namespace fusion::service

@@ -1,0 +1,50 @@
+// Writes the published map to the configured snapshot file: periodically (when it changed),
+// on request and at shutdown. Writes are serialised.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "fusion/service/map_snapshot.h"
+
+namespace fusion::service {
+
+class Persister {
+ public:
+  // interval 0: no periodic snapshots.
+  Persister(std::string path, std::chrono::seconds interval, SnapshotHub* hub);
+  ~Persister();
+  Persister(const Persister&) = delete;
+  Persister& operator=(const Persister&) = delete;
+
+  [[nodiscard]] bool enabled() const { return !path_.empty(); }
+  [[nodiscard]] const std::string& path() const { return path_; }
+  void Start();
+  void Stop();
+  // Writes the current snapshot now. Returns false with *error on failure.
+  bool SaveNow(std::uint64_t* version, std::uint64_t* bytes, std::string* error);
+  // The version the file on disk holds (loaded or last written); UINT64_MAX for none.
+  void set_saved_version(std::uint64_t version);
+  [[nodiscard]] std::uint64_t saves() const { return saves_.load(); }
+
+ private:
+  void Loop();
+
+  std::string path_;
+  std::chrono::seconds interval_;
+  SnapshotHub* hub_;
+  std::mutex write_mutex_;
+  std::uint64_t saved_version_ = UINT64_MAX;
+  std::atomic<std::uint64_t> saves_{0};
+  std::mutex stop_mutex_;
+  std::condition_variable stop_cv_;
+  bool stop_ = false;
+  std::thread thread_;
+};
+
+}  // namespace fusion::service

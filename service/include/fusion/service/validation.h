@@ -1,0 +1,26 @@
+// Checks every DDS sample before anything of it reaches core.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "fusion/service/cloud.h"
+#include "fusion_dds.h"
+
+namespace fusion::service {
+
+struct IngestLimits {
+  std::uint32_t max_points = 4'000'000;
+  double quaternion_tolerance = 1e-3;  // | |q| - 1 | above this is rejected
+  double max_abs_translation_m = 1e5;  // per axis
+};
+
+// std::nullopt if the sample may be converted and integrated; otherwise the reason, with
+// *detail saying what exactly was wrong (for the log).
+[[nodiscard]] std::optional<RejectReason> ValidateSample(
+    const fusion_dds_PointCloud& sample, const IngestLimits& limits,
+    const std::function<bool(const std::string&)>& is_known_sensor, std::string* detail);
+
+}  // namespace fusion::service

@@ -1,0 +1,232 @@
+// Wire <-> core conversions: the only place that knows both sides.
+#include "fusion/service/conversions.h"
+
+#include <cmath>
+
+namespace fusion::service {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDegToRad = kPi / 180.0;
+
+bool Finite(const Eigen::Vector3d& v) { return v.allFinite(); }
+
+Polynomial2 PolynomialFromConfig(const fusion::v1::Polynomial2& p) {
+  return {p.a2(), p.a1(), p.a0()};
+}
+
+}  // namespace
+
+Eigen::Isometry3d IsometryFromConfig(const fusion::v1::Transform& t) {
+  Eigen::Quaterniond q(t.qw(), t.qx(), t.qy(), t.qz());
+  if (q.coeffs().isZero()) q = Eigen::Quaterniond::Identity();
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = q.normalized().toRotationMatrix();
+  T.translation() = Eigen::Vector3d(t.tx(), t.ty(), t.tz());
+  return T;
+}
+
+std::optional<SensorSetup> SensorSetupFromConfig(const fusion::v1::SensorConfig& c,
+                                                 std::string* error) {
+  SensorSetup setup;
+  setup.id = c.id();
+  setup.preset = c.preset();
+  if (c.id().empty()) {
+    *error = "id: must not be empty";
+    return std::nullopt;
+  }
+  if (!c.preset().empty()) {
+    auto preset = SensorPreset(c.preset());
+    if (!preset) {
+      *error = "preset: '" + c.preset() + "' is not a known preset (sr3000, stoc)";
+      return std::nullopt;
+    }
+    setup.spec = *preset;
+  } else {
+    // Without a preset every geometric field must be given.
+    const char* missing = !c.has_r_min_m()     ? "r_min_m"
+                          : !c.has_r_max_m()   ? "r_max_m"
+                          : !c.has_fov_h_deg() ? "fov_h_deg"
+                          : !c.has_fov_v_deg() ? "fov_v_deg"
+                          : !c.has_cols()      ? "cols"
+                          : !c.has_rows()      ? "rows"
+                          : !c.has_q_mu()      ? "q_mu"
+                          : !c.has_q_sigma()   ? "q_sigma"
+                                               : nullptr;
+    if (missing != nullptr) {
+      *error = std::string(missing) + ": required when no preset is given";
+      return std::nullopt;
+    }
+  }
+  SensorSpec& spec = setup.spec;
+  if (spec.name.empty()) spec.name = c.id();
+  if (c.model() == "classic_beam") {
+    spec.model = ForwardModelKind::kClassicBeam;
+  } else if (c.model() == "paper3d") {
+    spec.model = ForwardModelKind::kPaper3d;
+  } else if (!c.model().empty()) {
+    *error = "model: '" + c.model() + "' is not paper3d or classic_beam";
+    return std::nullopt;
+  }
+  if (c.has_r_min_m()) spec.r_min_m = c.r_min_m();
+  if (c.has_r_max_m()) spec.r_max_m = c.r_max_m();
+  if (c.has_fov_h_deg()) spec.fov_h_rad = c.fov_h_deg() * kDegToRad;
+  if (c.has_fov_v_deg()) spec.fov_v_rad = c.fov_v_deg() * kDegToRad;
+  if (c.has_cols()) spec.cols = static_cast<int>(std::min<std::uint32_t>(c.cols(), 1u << 30));
+  if (c.has_rows()) spec.rows = static_cast<int>(std::min<std::uint32_t>(c.rows(), 1u << 30));
+  if (c.has_q_mu()) spec.q_mu = PolynomialFromConfig(c.q_mu());
+  if (c.has_q_sigma()) spec.q_sigma = PolynomialFromConfig(c.q_sigma());
+  if (c.has_epsilon()) spec.epsilon = c.epsilon();
+  if (static_cast<long long>(spec.cols) * spec.rows > 4'000'000) {
+    *error =
+        "cols: cols * rows = " + std::to_string(static_cast<long long>(spec.cols) * spec.rows) +
+        " beams is more than 4000000";
+    return std::nullopt;
+  }
+  const std::string spec_error = ValidateSensorSpec(spec);
+  if (!spec_error.empty()) {
+    // Name the configuration field, not core's: degrees in the file, radians in core.
+    std::string field = spec_error.substr(0, spec_error.find(' '));
+    if (field == "fov_h_rad") field = "fov_h_deg";
+    if (field == "fov_v_rad") field = "fov_v_deg";
+    *error = field + ": " + spec_error;
+    return std::nullopt;
+  }
+  if (c.has_mount()) {
+    const auto& m = c.mount();
+    const Eigen::Vector4d q(m.qx(), m.qy(), m.qz(), m.qw());
+    if (!Finite(Eigen::Vector3d(m.tx(), m.ty(), m.tz())) || !q.allFinite() ||
+        (!q.isZero() && std::abs(q.norm() - 1.0) > 1e-3)) {
+      *error = "mount: translation must be finite and the quaternion unit (or all zero)";
+      return std::nullopt;
+    }
+    setup.T_published_sensor = IsometryFromConfig(m);
+  }
+  if (c.has_queue_depth()) {
+    if (c.queue_depth() < 1 || c.queue_depth() > 1000) {
+      *error = "queue_depth: " + std::to_string(c.queue_depth()) + " is outside 1..1000";
+      return std::nullopt;
+    }
+    setup.queue_depth = c.queue_depth();
+  }
+  return setup;
+}
+
+std::optional<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig& c,
+                                                         std::string* error) {
+  WorldMapOptions options;
+  if (!(c.resolution_m() >= 0.001 && c.resolution_m() <= 10.0)) {
+    *error = "resolution_m: " + std::to_string(c.resolution_m()) + " is outside [0.001, 10]";
+    return std::nullopt;
+  }
+  options.resolution_m = c.resolution_m();
+  const auto rule = FusionRuleFromName(c.fusion_rule());
+  if (!rule) {
+    std::string names;
+    for (const auto& n : FusionRuleNames()) names += (names.empty() ? "" : ", ") + n;
+    *error = "fusion_rule: '" + c.fusion_rule() + "' is not one of " + names;
+    return std::nullopt;
+  }
+  options.rule = *rule;
+  if (!(c.pose_tolerance_m() >= 0.0 && std::isfinite(c.pose_tolerance_m()))) {
+    *error = "pose_tolerance_m: must be finite and >= 0";
+    return std::nullopt;
+  }
+  if (!(c.pose_tolerance_deg() >= 0.0 && c.pose_tolerance_deg() <= 180.0)) {
+    *error = "pose_tolerance_deg: must lie in [0, 180]";
+    return std::nullopt;
+  }
+  options.pose_tolerance_m = c.pose_tolerance_m();
+  options.pose_tolerance_rad = c.pose_tolerance_deg() * kDegToRad;
+  if (!(c.beam_cell_size_m() >= 1e-4 && c.beam_cell_size_m() <= 1.0)) {
+    *error = "beam_cell_size_m: must lie in [0.0001, 1]";
+    return std::nullopt;
+  }
+  options.beam_grid.cell_size_m = c.beam_cell_size_m();
+  options.render.resolution_m = options.resolution_m;
+  return options;
+}
+
+StateThresholds ThresholdsFromConfig(const fusion::v1::MapConfig& c) {
+  return {c.occupied_threshold(), c.free_threshold()};
+}
+
+Eigen::Isometry3d IsometryFromDds(const fusion_dds_Pose& pose) {
+  const Eigen::Quaterniond q(pose.qw, pose.qx, pose.qy, pose.qz);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = q.normalized().toRotationMatrix();
+  T.translation() = Eigen::Vector3d(pose.tx, pose.ty, pose.tz);
+  return T;
+}
+
+Cloud CloudFromDds(const fusion_dds_PointCloud& sample) {
+  Cloud cloud;
+  cloud.sensor_id = sample.sensor_id;
+  cloud.sequence_number = sample.sequence_number;
+  cloud.stamp_s = sample.stamp.sec + 1e-9 * sample.stamp.nanosec;
+  cloud.T_world_published = IsometryFromDds(sample.T_world_sensor);
+  cloud.width = sample.width;
+  cloud.height = sample.height;
+  cloud.xyz.assign(sample.xyz._buffer, sample.xyz._buffer + sample.xyz._length);
+  cloud.beyond_range.assign(sample.beyond_range._buffer,
+                            sample.beyond_range._buffer + sample.beyond_range._length);
+  return cloud;
+}
+
+Eigen::Vector3d FromProto(const fusion::v1::Point& p) { return {p.x(), p.y(), p.z()}; }
+
+void ToProto(const Eigen::Vector3d& v, fusion::v1::Point* p) {
+  p->set_x(v.x());
+  p->set_y(v.y());
+  p->set_z(v.z());
+}
+
+fusion::v1::VoxelState StateOf(double probability, const StateThresholds& t) {
+  if (probability >= t.occupied) return fusion::v1::VOXEL_STATE_OCCUPIED;
+  if (probability < t.free) return fusion::v1::VOXEL_STATE_FREE;
+  return fusion::v1::VOXEL_STATE_UNKNOWN;
+}
+
+void VoxelToProto(const octomap::OcTree& tree, const octomap::OcTreeKey& key, unsigned depth,
+                  const octomap::OcTreeNode* node, const StateThresholds& t,
+                  fusion::v1::Voxel* voxel) {
+  const octomap::point3d c = tree.keyToCoord(key, depth);
+  ToProto(Eigen::Vector3d(c.x(), c.y(), c.z()), voxel->mutable_center());
+  voxel->set_size_m(tree.getNodeSize(depth));
+  const double p = node != nullptr ? node->getOccupancy() : 0.5;
+  voxel->set_probability(p);
+  voxel->set_state(node != nullptr ? StateOf(p, t) : fusion::v1::VOXEL_STATE_UNKNOWN);
+}
+
+void PlaneToProto(const Plane& plane, fusion::v1::Plane* out) {
+  out->set_phi_deg(plane.phi_rad / kDegToRad);
+  out->set_theta_deg(plane.theta_rad / kDegToRad);
+  out->set_d_m(plane.distance_m);
+  ToProto(plane.normal, out->mutable_normal());
+  out->set_votes(plane.votes);
+  out->set_support_voxels(plane.support_voxels);
+  out->set_rms_m(plane.rms_m);
+  if (!plane.extent.isEmpty()) {
+    ToProto(plane.extent.min(), out->mutable_extent_min());
+    ToProto(plane.extent.max(), out->mutable_extent_max());
+  }
+}
+
+HoughOptions HoughOptionsFromProto(const fusion::v1::FindPlanesRequest& request,
+                                   double resolution_m) {
+  HoughOptions options;
+  if (request.has_region_min() || request.has_region_max()) {
+    options.region =
+        Eigen::AlignedBox3d(FromProto(request.region_min()), FromProto(request.region_max()));
+  }
+  if (request.max_planes() > 0) options.max_planes = request.max_planes();
+  if (request.min_probability() > 0.0) options.min_probability = request.min_probability();
+  if (request.angle_step_deg() > 0.0) {
+    options.phi_bin_rad = options.theta_bin_rad = request.angle_step_deg() * kDegToRad;
+  }
+  options.d_bin_m = request.distance_step_m() > 0.0 ? request.distance_step_m() : resolution_m;
+  if (request.min_support_voxels() > 0) options.min_support_voxels = request.min_support_voxels();
+  return options;
+}
+
+}  // namespace fusion::service

@@ -1,0 +1,139 @@
+#include "fusion/service/dds_ingest.h"
+
+#include <spdlog/spdlog.h>
+
+#include "fusion/service/conversions.h"
+
+namespace fusion::service {
+namespace {
+
+constexpr int kMaxSamplesPerTake = 16;
+
+std::string DdsError(const char* call, dds_return_t rc) {
+  return std::string(call) + ": " + dds_strretcode(rc);
+}
+
+}  // namespace
+
+DdsIngest::DdsIngest(IngestQueues* queues, DdsIngestOptions options)
+    : queues_(queues), options_(std::move(options)) {}
+
+DdsIngest::~DdsIngest() { Stop(); }
+
+bool DdsIngest::Start(dds_entity_t participant, std::string* error) {
+  topic_ = dds_create_topic(participant, &fusion_dds_PointCloud_desc, options_.topic.c_str(),
+                            nullptr, nullptr);
+  if (topic_ < 0) {
+    *error = DdsError("dds_create_topic", topic_);
+    return false;
+  }
+  dds_qos_t* qos = dds_create_qos();
+  if (options_.reliable) {
+    dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  } else {
+    dds_qset_reliability(qos, DDS_RELIABILITY_BEST_EFFORT, 0);
+  }
+  // Keyed by sensor_id: keep the newest cloud of every sensor (the bounded queues behind
+  // this reader do the rest).
+  dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 1);
+  dds_qset_durability(qos, DDS_DURABILITY_VOLATILE);
+  reader_ = dds_create_reader(participant, topic_, qos, nullptr);
+  dds_delete_qos(qos);
+  if (reader_ < 0) {
+    *error = DdsError("dds_create_reader", reader_);
+    return false;
+  }
+  waitset_ = dds_create_waitset(participant);
+  read_condition_ = dds_create_readcondition(reader_, DDS_ANY_STATE);
+  stop_condition_ = dds_create_guardcondition(participant);
+  for (const auto& [entity, name] : {std::pair{waitset_, "dds_create_waitset"},
+                                     std::pair{read_condition_, "dds_create_readcondition"},
+                                     std::pair{stop_condition_, "dds_create_guardcondition"}}) {
+    if (entity < 0) {
+      *error = DdsError(name, entity);
+      return false;
+    }
+  }
+  dds_return_t rc = dds_waitset_attach(waitset_, read_condition_, 0);
+  if (rc == DDS_RETCODE_OK) rc = dds_waitset_attach(waitset_, stop_condition_, 1);
+  if (rc != DDS_RETCODE_OK) {
+    *error = DdsError("dds_waitset_attach", rc);
+    return false;
+  }
+  thread_ = std::thread([this] { Loop(); });
+  return true;
+}
+
+void DdsIngest::Stop() {
+  if (thread_.joinable()) {
+    stop_ = true;
+    dds_set_guardcondition(stop_condition_, true);
+    thread_.join();
+  }
+  for (dds_entity_t* e : {&waitset_, &read_condition_, &stop_condition_, &reader_}) {
+    if (*e > 0) dds_delete(*e);
+    *e = 0;
+  }
+}
+
+void DdsIngest::Loop() {
+  void* samples[kMaxSamplesPerTake] = {};
+  dds_sample_info_t infos[kMaxSamplesPerTake];
+  while (!stop_) {
+    const dds_return_t woken = dds_waitset_wait(waitset_, nullptr, 0, DDS_MSECS(500));
+    if (woken < 0) {
+      spdlog::error("dds_waitset_wait: {}", dds_strretcode(woken));
+      continue;
+    }
+    for (;;) {
+      const dds_return_t n =
+          dds_take(reader_, samples, infos, kMaxSamplesPerTake, kMaxSamplesPerTake);
+      if (n < 0) {
+        spdlog::error("dds_take: {}", dds_strretcode(n));
+        break;
+      }
+      for (int i = 0; i < n; ++i) {
+        if (!infos[i].valid_data) continue;  // dispose / unregister notifications
+        try {
+          Handle(*static_cast<const fusion_dds_PointCloud*>(samples[i]));
+        } catch (const std::exception& e) {
+          // Out of memory copying a huge cloud, for instance: drop it, keep serving.
+          spdlog::error("ingest: cloud dropped: {}", e.what());
+        }
+      }
+      if (n > 0) dds_return_loan(reader_, samples, n);
+      if (n < kMaxSamplesPerTake) break;
+    }
+  }
+}
+
+void DdsIngest::Handle(const fusion_dds_PointCloud& sample) {
+  std::string detail;
+  const auto reason = ValidateSample(
+      sample, options_.limits, [this](const std::string& id) { return queues_->Known(id); },
+      &detail);
+  const std::string sensor_id = sample.sensor_id != nullptr ? sample.sensor_id : "";
+  if (reason) {
+    queues_->CountRejected(sensor_id, *reason);
+    LogRejection(*reason, sensor_id, detail);
+    return;
+  }
+  queues_->Push(CloudFromDds(sample));
+}
+
+void DdsIngest::LogRejection(RejectReason reason, const std::string& sensor_id,
+                             const std::string& detail) {
+  const auto i = static_cast<std::size_t>(reason);
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_log_[i] < options_.log_interval) {
+    ++suppressed_[i];
+    return;
+  }
+  last_log_[i] = now;
+  spdlog::warn("ingest: rejected cloud from '{}' ({}): {}{}", sensor_id, RejectReasonName(reason),
+               detail,
+               suppressed_[i] > 0 ? fmt::format(" [{} more not logged]", suppressed_[i]) : "");
+  suppressed_[i] = 0;
+}
+
+}  // namespace fusion::service

@@ -1,0 +1,227 @@
+#include "fusion/service/fusion_worker.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
+namespace fusion::service {
+
+FusionWorker::FusionWorker(WorkerOptions options, std::vector<SensorSetup> sensors,
+                           IngestQueues* queues, SnapshotHub* hub)
+    : options_(std::move(options)), sensors_(std::move(sensors)), queues_(queues), hub_(hub) {}
+
+FusionWorker::~FusionWorker() { Stop(); }
+
+bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> base, std::string* error) {
+  std::lock_guard<std::mutex> lock(map_mutex_);
+  base_ = std::move(base);
+  RebuildMapLocked();
+  for (const auto& sensor : sensors_) {
+    const MapStatus status = map_->AddSensor(sensor.id, sensor.spec);
+    if (status != MapStatus::kOk) {
+      *error = "sensor '" + sensor.id + "': " + MapStatusName(status);
+      return false;
+    }
+  }
+  if (base_) {
+    version_offset_ = 1;
+    PublishLocked({}, /*reset=*/true);
+  }
+  thread_ = std::thread([this] { Loop(); });
+  return true;
+}
+
+void FusionWorker::Stop() {
+  if (!thread_.joinable()) return;
+  stop_ = true;
+  queues_->Wake();
+  thread_.join();
+}
+
+void FusionWorker::RebuildMapLocked() {
+  map_ = std::make_unique<WorldMap>(options_.map);
+  RebuildPublishedLocked();
+  rendered_map_version_ = 0;
+  dirty_ = false;
+}
+
+void FusionWorker::Loop() {
+  using Clock = std::chrono::steady_clock;
+  auto last_render = Clock::now();
+  std::vector<Cloud> clouds;
+  const auto step = [&](Clock::time_point until) {
+    clouds.clear();
+    queues_->PopAll(&clouds, until);
+    std::lock_guard<std::mutex> lock(map_mutex_);
+    for (const Cloud& cloud : clouds) IntegrateLocked(cloud);
+    if (dirty_ && (Clock::now() - last_render >= options_.render_interval || stop_)) {
+      RenderAndPublishLocked();
+      last_render = Clock::now();
+    }
+  };
+  while (!stop_) {
+    bool dirty = false;
+    {
+      std::lock_guard<std::mutex> lock(map_mutex_);
+      dirty = dirty_;
+    }
+    step(dirty ? last_render + options_.render_interval
+               : Clock::now() + std::chrono::milliseconds(500));
+  }
+  step(Clock::now());  // drain what is left, render and publish
+}
+
+void FusionWorker::IntegrateLocked(const Cloud& cloud) {
+  auto* counters = queues_->counters(cloud.sensor_id);
+  const SensorSetup* setup = nullptr;
+  for (const auto& s : sensors_) {
+    if (s.id == cloud.sensor_id) setup = &s;
+  }
+  if (counters == nullptr || setup == nullptr) return;
+  const Eigen::Isometry3d T_world_sensor = cloud.T_world_published * setup->T_published_sensor;
+  IntegrationStats stats;
+  MapStatus status = MapStatus::kInvalidArgument;
+  try {
+    status = map_->Integrate(cloud.sensor_id, T_world_sensor, cloud.xyz.data(),
+                             cloud.xyz.size() / 3, cloud.beyond_range, &stats);
+  } catch (const std::exception& e) {
+    spdlog::error("worker: cloud {} of '{}' failed: {}", cloud.sequence_number, cloud.sensor_id,
+                  e.what());
+    return;
+  }
+  if (status != MapStatus::kOk) {
+    spdlog::warn("worker: cloud {} of '{}' not integrated: {}", cloud.sequence_number,
+                 cloud.sensor_id, MapStatusName(status));
+    return;
+  }
+  dirty_ = true;
+  integrated_.fetch_add(1, std::memory_order_relaxed);
+  counters->integrated.fetch_add(1, std::memory_order_relaxed);
+  counters->points_updated.fetch_add(stats.updated, std::memory_order_relaxed);
+  counters->points_beyond_range.fetch_add(stats.beyond_range, std::memory_order_relaxed);
+  counters->points_missing.fetch_add(stats.missing, std::memory_order_relaxed);
+  counters->points_rejected.fetch_add(stats.rejected_nonfinite + stats.rejected_outside_fov,
+                                      std::memory_order_relaxed);
+  spdlog::debug("worker: cloud {} of '{}': {} updated, {} beyond range, {} missing",
+                cloud.sequence_number, cloud.sensor_id, stats.updated, stats.beyond_range,
+                stats.missing);
+}
+
+std::optional<float> FusionWorker::FusedLogOddsLocked(const octomap::OcTreeKey& key) const {
+  const octomap::OcTreeNode* live = map_->tree().search(key);
+  // A node at log-odds exactly 0 is a voxel whose last opinion went away: no information.
+  if (live != nullptr && live->getLogOdds() == 0.0f) live = nullptr;
+  const octomap::OcTreeNode* base = base_ ? base_->search(key) : nullptr;
+  if (live == nullptr && base == nullptr) return std::nullopt;
+  if (base == nullptr) return live->getLogOdds();
+  if (live == nullptr) return base->getLogOdds();
+  const double p = Fuse(options_.map.rule, base->getOccupancy(), live->getOccupancy());
+  const double clamped =
+      std::clamp(p, options_.map.clamping_min_probability, options_.map.clamping_max_probability);
+  return static_cast<float>(LogOdds(clamped));
+}
+
+void FusionWorker::RenderAndPublishLocked() {
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    map_->RenderAll();
+  } catch (const std::exception& e) {
+    spdlog::error("worker: render failed: {}", e.what());
+    return;
+  }
+  dirty_ = false;
+  renders_.fetch_add(1, std::memory_order_relaxed);
+  auto since = map_->ChangedKeysSince(rendered_map_version_);
+  std::vector<octomap::OcTreeKey> changed;
+  const bool full_refresh = !since;
+  if (since) changed = std::move(*since);
+  rendered_map_version_ = map_->version();
+  // Voxels that lost their information must disappear from the published map. OctoMap 1.9's
+  // deleteNode frees an emptied inner node without its child array (an assertion in the node
+  // destructor), so such a render rebuilds the published map instead of deleting nodes.
+  bool rebuild = full_refresh;
+  std::vector<std::pair<octomap::OcTreeKey, float>> updates;
+  updates.reserve(changed.size());
+  for (const auto& key : changed) {
+    const auto value = FusedLogOddsLocked(key);
+    if (value) {
+      updates.emplace_back(key, *value);
+    } else if (published_->search(key) != nullptr) {
+      rebuild = true;
+    }
+  }
+  if (rebuild) {
+    if (full_refresh) spdlog::warn("worker: change history exhausted; rebuilding the map");
+    RebuildPublishedLocked();
+  } else {
+    for (const auto& [key, value] : updates) published_->setNodeValue(key, value);
+  }
+  for (const auto& sensor : sensors_) {
+    if (const BeamGrid* grid = map_->beam_grid(sensor.id)) {
+      queues_->counters(sensor.id)->memory_bytes.store(grid->MemoryBytes());
+    }
+  }
+  const std::size_t changed_count = changed.size();
+  PublishLocked(std::move(changed), /*reset=*/full_refresh);
+  spdlog::debug(
+      "worker: rendered version {} ({} voxels changed) in {:.1f} ms",
+      version_offset_ + rendered_map_version_, changed_count,
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+}
+
+void FusionWorker::RebuildPublishedLocked() {
+  published_ = base_ ? std::make_unique<octomap::OcTree>(*base_)
+                     : std::make_unique<octomap::OcTree>(options_.map.resolution_m);
+  published_->setOccupancyThres(options_.thresholds.occupied);
+  const octomap::OcTree& live = map_->tree();
+  for (auto it = live.begin_leafs(), end = live.end_leafs(); it != end; ++it) {
+    // WorldMap keeps its leaves at full depth (it never prunes).
+    if (it.getDepth() != live.getTreeDepth()) continue;
+    if (const auto value = FusedLogOddsLocked(it.getKey())) {
+      published_->setNodeValue(it.getKey(), *value);
+    }
+  }
+}
+
+void FusionWorker::PublishLocked(std::vector<octomap::OcTreeKey> changed, bool reset) {
+  auto snapshot = std::make_shared<MapSnapshot>();
+  snapshot->version = version_offset_ + map_->version();
+  snapshot->tree = std::make_shared<const octomap::OcTree>(*published_);
+  hub_->Publish(std::move(snapshot), std::move(changed), reset);
+}
+
+std::uint64_t FusionWorker::Reset() {
+  std::lock_guard<std::mutex> lock(map_mutex_);
+  version_offset_ = hub_->Current()->version + 1;
+  base_.reset();
+  RebuildMapLocked();
+  for (const auto& sensor : sensors_) (void)map_->AddSensor(sensor.id, sensor.spec);
+  PublishLocked({}, /*reset=*/true);
+  spdlog::info("map reset; version {}", version_offset_);
+  return version_offset_;
+}
+
+BeamLookup FusionWorker::InspectBeam(const std::string& sensor_id, std::optional<std::size_t> beam,
+                                     std::size_t row, std::size_t col, BeamInspection* out) const {
+  std::lock_guard<std::mutex> lock(map_mutex_);
+  const BeamGrid* grid = map_->beam_grid(sensor_id);
+  if (grid == nullptr) return BeamLookup::kUnknownSensor;
+  const BeamTessellation& tess = grid->tessellation();
+  if (!beam) {
+    if (row >= static_cast<std::size_t>(tess.rows()) ||
+        col >= static_cast<std::size_t>(tess.cols())) {
+      return BeamLookup::kBeamOutOfRange;
+    }
+    beam = row * static_cast<std::size_t>(tess.cols()) + col;
+  }
+  if (*beam >= tess.beam_count()) return BeamLookup::kBeamOutOfRange;
+  out->beam = *beam;
+  out->cell_size_m = grid->options().cell_size_m;
+  out->direction_sensor = tess.Direction(*beam);
+  out->first_hit = grid->FirstHitProbabilities(*beam);
+  out->cell_occupancy = grid->CellProbabilities(*beam);
+  out->touched = grid->Touched(*beam);
+  return BeamLookup::kOk;
+}
+
+}  // namespace fusion::service

@@ -1,0 +1,87 @@
+#include "fusion/service/map_snapshot.h"
+
+#include <unordered_set>
+
+namespace fusion::service {
+
+SnapshotHub::SnapshotHub(std::size_t max_logged_keys) : max_logged_keys_(max_logged_keys) {
+  auto empty = std::make_shared<MapSnapshot>();
+  empty->tree = std::make_shared<octomap::OcTree>(0.05);
+  current_ = std::move(empty);
+}
+
+std::shared_ptr<const MapSnapshot> SnapshotHub::Current() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return current_;
+}
+
+void SnapshotHub::Publish(std::shared_ptr<const MapSnapshot> snapshot,
+                          std::vector<octomap::OcTreeKey> changed, bool reset) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const std::uint64_t previous = current_->version;
+    if (reset) {
+      log_.clear();
+      logged_keys_ = 0;
+      log_start_version_ = snapshot->version;
+    } else if (log_.empty() && logged_keys_ == 0 && log_start_version_ == 0 && previous > 0) {
+      log_start_version_ = previous;  // first publish after a loaded snapshot
+    }
+    if (!reset) {
+      logged_keys_ += changed.size();
+      log_.push_back({snapshot->version, std::move(changed)});
+      while (logged_keys_ > max_logged_keys_ && !log_.empty()) {
+        logged_keys_ -= log_.front().keys.size();
+        log_start_version_ = log_.front().version;
+        log_.pop_front();
+      }
+    }
+    current_ = std::move(snapshot);
+  }
+  Notify();
+}
+
+bool SnapshotHub::ChangedSince(std::uint64_t since, std::vector<octomap::OcTreeKey>* keys) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (since < log_start_version_) return false;
+  std::unordered_set<octomap::OcTreeKey, octomap::OcTreeKey::KeyHash> seen;
+  for (const auto& entry : log_) {
+    if (entry.version <= since) continue;
+    for (const auto& key : entry.keys) {
+      if (seen.insert(key).second) keys->push_back(key);
+    }
+  }
+  return true;
+}
+
+int SnapshotHub::Subscribe(std::function<void()> callback) {
+  std::lock_guard<std::mutex> lock(subscribers_mutex_);
+  const int id = next_id_++;
+  subscribers_.emplace(id, std::move(callback));
+  return id;
+}
+
+void SnapshotHub::Unsubscribe(int id) {
+  std::lock_guard<std::mutex> lock(subscribers_mutex_);
+  subscribers_.erase(id);
+}
+
+void SnapshotHub::Close() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    closed_ = true;
+  }
+  Notify();
+}
+
+bool SnapshotHub::closed() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return closed_;
+}
+
+void SnapshotHub::Notify() {
+  std::lock_guard<std::mutex> lock(subscribers_mutex_);
+  for (auto& entry : subscribers_) entry.second();
+}
+
+}  // namespace fusion::service

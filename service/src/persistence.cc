@@ -1,0 +1,176 @@
+#include "fusion/service/persistence.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <ctime>
+#include <fstream>
+#include <sstream>
+
+namespace fusion::service {
+namespace {
+
+std::string Errno(const std::string& what) { return what + ": " + std::strerror(errno); }
+
+bool WriteAll(int fd, const std::string& data) {
+  std::size_t done = 0;
+  while (done < data.size()) {
+    const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return false;
+    done += static_cast<std::size_t>(n);
+  }
+  return true;
+}
+
+std::string DirectoryOf(const std::string& path) {
+  const auto slash = path.rfind('/');
+  if (slash == std::string::npos) return ".";
+  return slash == 0 ? "/" : path.substr(0, slash);
+}
+
+std::string UtcStamp() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char buffer[32];
+  std::strftime(buffer, sizeof buffer, "%Y%m%dT%H%M%SZ", &tm);
+  return buffer;
+}
+
+// Parses the .ot header ("# Octomap OcTree file", "id X", "size N", "res R", "data") and
+// leaves `in` at the first data byte.
+bool ParseHeader(std::istream& in, std::string* id, std::uint64_t* size, double* res) {
+  std::string line;
+  if (!std::getline(in, line) || line.rfind("# Octomap OcTree file", 0) != 0) return false;
+  bool have_id = false, have_size = false, have_res = false;
+  while (std::getline(in, line)) {
+    if (!line.empty() && line[0] == '#') continue;
+    std::istringstream fields(line);
+    std::string token;
+    fields >> token;
+    if (token == "id")
+      have_id = static_cast<bool>(fields >> *id);
+    else if (token == "size")
+      have_size = static_cast<bool>(fields >> *size);
+    else if (token == "res")
+      have_res = static_cast<bool>(fields >> *res);
+    else if (token == "data")
+      return have_id && have_size && have_res;
+    else
+      return false;
+  }
+  return false;
+}
+
+}  // namespace
+
+std::string SerializeOt(const octomap::OcTree& tree) {
+  std::ostringstream out(std::ios::binary);
+  tree.write(out);
+  return out.str();
+}
+
+std::string SerializeBt(const octomap::OcTree& tree) {
+  std::ostringstream out(std::ios::binary);
+  tree.writeBinaryConst(out);
+  return out.str();
+}
+
+bool WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path, std::uint64_t* bytes,
+                       std::string* error) {
+  const std::string data = SerializeOt(tree);
+  const std::string temp = path + ".tmp-" + std::to_string(::getpid());
+  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    *error = Errno("open " + temp);
+    return false;
+  }
+  const bool written = WriteAll(fd, data);
+  const bool synced = written && ::fsync(fd) == 0;
+  const int saved_errno = errno;
+  ::close(fd);
+  if (!written || !synced) {
+    errno = saved_errno;
+    *error = Errno(std::string(written ? "fsync " : "write ") + temp);
+    ::unlink(temp.c_str());
+    return false;
+  }
+  if (::rename(temp.c_str(), path.c_str()) != 0) {
+    *error = Errno("rename " + temp + " -> " + path);
+    ::unlink(temp.c_str());
+    return false;
+  }
+  // The rename itself must reach the disk too.
+  const int dir = ::open(DirectoryOf(path).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir >= 0) {
+    ::fsync(dir);
+    ::close(dir);
+  }
+  if (bytes != nullptr) *bytes = data.size();
+  return true;
+}
+
+LoadStatus LoadSnapshotFile(const std::string& path, double expected_resolution_m,
+                            std::unique_ptr<octomap::OcTree>* tree, std::string* message) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    if (::access(path.c_str(), F_OK) != 0 && errno == ENOENT) return LoadStatus::kMissing;
+    *message = Errno("cannot read " + path);
+    return LoadStatus::kError;
+  }
+  std::string problem;
+  std::string id;
+  std::uint64_t size = 0;
+  double res = 0.0;
+  if (!ParseHeader(in, &id, &size, &res)) {
+    problem = "not an OctoMap .ot file (bad header)";
+  } else if (id != "OcTree") {
+    problem = "holds a '" + id + "', not an OcTree";
+  } else if (!(res > 0.0)) {
+    problem = "invalid resolution in header";
+  } else {
+    // Every node of an OcTree .ot is 4 bytes of log-odds plus 1 byte of child flags.
+    const auto data_start = in.tellg();
+    in.seekg(0, std::ios::end);
+    const auto data_bytes = static_cast<std::uint64_t>(in.tellg() - data_start);
+    if (data_bytes != 5 * size) {
+      problem = "header declares " + std::to_string(size) + " nodes (" + std::to_string(5 * size) +
+                " bytes) but " + std::to_string(data_bytes) +
+                " bytes follow (truncated or damaged)";
+    } else {
+      in.seekg(0);
+      std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(in));
+      auto* octree = dynamic_cast<octomap::OcTree*>(read.get());
+      if (octree == nullptr || !in || octree->size() != size) {
+        problem = "OctoMap could not parse the node data";
+      } else {
+        read.release();
+        tree->reset(octree);
+      }
+    }
+  }
+  if (!problem.empty()) {
+    const std::string aside = path + ".corrupt-" + UtcStamp();
+    if (::rename(path.c_str(), aside.c_str()) != 0) {
+      *message = path + ": " + problem + "; and it cannot be set aside: " + Errno("rename");
+      return LoadStatus::kError;
+    }
+    *message = path + ": " + problem + "; moved to " + aside;
+    return LoadStatus::kCorrupt;
+  }
+  if (std::abs((*tree)->getResolution() - expected_resolution_m) > 1e-9) {
+    *message = path + ": resolution " + std::to_string((*tree)->getResolution()) +
+               " m differs from map.resolution_m " + std::to_string(expected_resolution_m) +
+               " m; move the file away or configure its resolution";
+    tree->reset();
+    return LoadStatus::kError;
+  }
+  return LoadStatus::kLoaded;
+}
+
+}  // namespace fusion::service

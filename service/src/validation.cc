@@ -1,0 +1,84 @@
+#include "fusion/service/validation.h"
+
+#include <cmath>
+
+namespace fusion::service {
+
+const char* RejectReasonName(RejectReason reason) {
+  switch (reason) {
+    case RejectReason::kEmptySensorId:
+      return "empty_sensor_id";
+    case RejectReason::kUnknownSensor:
+      return "unknown_sensor";
+    case RejectReason::kPointCountMismatch:
+      return "point_count_mismatch";
+    case RejectReason::kBeyondRangeMismatch:
+      return "beyond_range_mismatch";
+    case RejectReason::kTooManyPoints:
+      return "absurd_point_count";
+    case RejectReason::kNonFinitePose:
+      return "non_finite_pose";
+    case RejectReason::kNonUnitQuaternion:
+      return "non_unit_quaternion";
+    case RejectReason::kAbsurdTranslation:
+      return "absurd_translation";
+    case RejectReason::kCount:
+      break;
+  }
+  return "unknown_reason";
+}
+
+std::optional<RejectReason> ValidateSample(
+    const fusion_dds_PointCloud& sample, const IngestLimits& limits,
+    const std::function<bool(const std::string&)>& is_known_sensor, std::string* detail) {
+  if (sample.sensor_id == nullptr || sample.sensor_id[0] == '\0') {
+    *detail = "empty sensor_id";
+    return RejectReason::kEmptySensorId;
+  }
+  const std::string id = sample.sensor_id;
+  if (!is_known_sensor(id)) {
+    *detail = "sensor '" + id + "' is not configured";
+    return RejectReason::kUnknownSensor;
+  }
+  // 64-bit products: width * height of two uint32 cannot overflow.
+  const std::uint64_t points = std::uint64_t{sample.width} * sample.height;
+  if (points == 0 || points > limits.max_points) {
+    *detail = "width * height = " + std::to_string(points) + " points (limit " +
+              std::to_string(limits.max_points) + ")";
+    return RejectReason::kTooManyPoints;
+  }
+  if (sample.xyz._length != 3 * points || sample.xyz._buffer == nullptr) {
+    *detail = "xyz has " + std::to_string(sample.xyz._length) + " values, expected 3 * " +
+              std::to_string(points);
+    return RejectReason::kPointCountMismatch;
+  }
+  if (sample.beyond_range._length != 0 &&
+      (sample.beyond_range._length != points || sample.beyond_range._buffer == nullptr)) {
+    *detail = "beyond_range has " + std::to_string(sample.beyond_range._length) +
+              " flags, expected 0 or " + std::to_string(points);
+    return RejectReason::kBeyondRangeMismatch;
+  }
+  const fusion_dds_Pose& p = sample.T_world_sensor;
+  const double values[] = {p.tx, p.ty, p.tz, p.qx, p.qy, p.qz, p.qw};
+  for (double v : values) {
+    if (!std::isfinite(v)) {
+      *detail = "pose has a NaN or infinite component";
+      return RejectReason::kNonFinitePose;
+    }
+  }
+  const double norm = std::sqrt(p.qx * p.qx + p.qy * p.qy + p.qz * p.qz + p.qw * p.qw);
+  if (std::abs(norm - 1.0) > limits.quaternion_tolerance) {
+    *detail = "quaternion norm " + std::to_string(norm) + " is not 1";
+    return RejectReason::kNonUnitQuaternion;
+  }
+  for (double t : {p.tx, p.ty, p.tz}) {
+    if (std::abs(t) > limits.max_abs_translation_m) {
+      *detail = "translation component " + std::to_string(t) + " m beyond +-" +
+                std::to_string(limits.max_abs_translation_m) + " m";
+      return RejectReason::kAbsurdTranslation;
+    }
+  }
+  return std::nullopt;
+}
+
+}  // namespace fusion::service

@@ -1,0 +1,558 @@
+// fusiond end to end: a real fusiond process on 127.0.0.1:0 in a private DDS domain, fed with
+// simulated SR-3000 clouds of the paper's board scene over DDS, queried over gRPC.
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+#include <octomap/AbstractOcTree.h>
+#include <octomap/OcTree.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "../support/dds_publisher.h"
+#include "../support/subprocess.h"
+#include "fusion/core/sensor.h"
+#include "fusion/sim/scene.h"
+#include "fusion/sim/simulator.h"
+#include "fusion/v1/map_service.grpc.pb.h"
+#include "grpc/health/v1/health.grpc.pb.h"
+
+namespace {
+
+using fusion::testing::Subprocess;
+using fusion::testing::TestCloud;
+using fusion::testing::TestPublisher;
+using namespace std::chrono_literals;
+namespace v1 = fusion::v1;
+namespace fs = std::filesystem;
+
+const std::string kFusiond = std::string(FUSION_BINARY_DIR) + "/service/fusiond";
+constexpr int kCols = 44;  // SR-3000 field of view with a quarter of its beams: fast tests
+constexpr int kRows = 36;
+
+// A point on the paper's board (x = 1.75) and one in the free space in front of it.
+const Eigen::Vector3d kOnBoard(1.75, 0.0, 0.2);
+const Eigen::Vector3d kInFront(1.0, 0.0, 0.2);
+
+v1::Point P(const Eigen::Vector3d& v) {
+  v1::Point p;
+  p.set_x(v.x());
+  p.set_y(v.y());
+  p.set_z(v.z());
+  return p;
+}
+
+std::chrono::system_clock::time_point In(std::chrono::milliseconds ms) {
+  return std::chrono::system_clock::now() + ms;
+}
+
+class FusiondServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    // A domain per test: a fusiond killed with SIGKILL stays a matched (dead) reader in its
+    // domain until its DDS lease expires, and reliable writers would wait for its acks.
+    static unsigned test_index = 0;
+    domain_ = 1 + (fusion::testing::PrivateDomainId() + 41 * test_index++) % 200;
+    dir_ = ::testing::TempDir() + "fusiond_service_" + std::to_string(getpid()) + "_" +
+           ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    snapshot_ = dir_ + "/map.ot";
+    config_ = dir_ + "/fusiond.pbtxt";
+    std::ofstream(config_) << "listen_address: \"127.0.0.1:0\"\n"
+                           << "dds_domain: " << domain_ << "\n"
+                           << "log_level: \"warn\"\n"
+                           << "sensors { id: \"sr\" preset: \"sr3000\" cols: " << kCols
+                           << " rows: " << kRows << " }\n"
+                           << "map { resolution_m: 0.05 render_interval_ms: 100 }\n"
+                           << "ingest { reliability: \"reliable\" max_points: 100000 }\n"
+                           << "limits { max_points_per_query: 1000 max_box_voxels: 2000000 "
+                           << "max_voxels_per_page: 1000000 }\n"
+                           << "persistence { path: \"" << snapshot_ << "\" interval_s: 1 }\n";
+  }
+
+  // Starts fusiond and connects the stubs.
+  std::unique_ptr<Subprocess> Start() {
+    auto process =
+        std::make_unique<Subprocess>(std::vector<std::string>{kFusiond, "--config", config_});
+    EXPECT_TRUE(process->started());
+    const auto port = process->WaitForOutput(R"(listening on 127\.0\.0\.1:(\d+))", 20s);
+    EXPECT_TRUE(port) << "no port line in: " << process->output();
+    if (!port) return nullptr;
+    channel_ = grpc::CreateChannel("127.0.0.1:" + *port, grpc::InsecureChannelCredentials());
+    stub_ = v1::FusionMap::NewStub(channel_);
+    return process;
+  }
+
+  v1::PointOccupancy Occupancy(const Eigen::Vector3d& p, std::uint64_t* version = nullptr) {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::QueryPointsRequest request;
+    *request.add_points() = P(p);
+    v1::QueryPointsResponse reply;
+    const auto status = stub_->QueryPoints(&context, request, &reply);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    if (version) *version = reply.map_version();
+    return reply.results_size() == 1 ? reply.results(0) : v1::PointOccupancy();
+  }
+
+  v1::Stats Stats() {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::Stats stats;
+    EXPECT_TRUE(stub_->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
+    return stats;
+  }
+
+  v1::SensorCounters SrCounters() {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::ListSensorsResponse reply;
+    EXPECT_TRUE(stub_->ListSensors(&context, v1::ListSensorsRequest(), &reply).ok());
+    for (const auto& s : reply.sensors()) {
+      if (s.id() == "sr") return s.counters();
+    }
+    ADD_FAILURE() << "sensor 'sr' not listed";
+    return {};
+  }
+
+  // Publishes simulated frames of the board scene until the board is occupied and the space
+  // in front of it free. Returns the map version that showed it.
+  std::uint64_t MapTheBoard(TestPublisher& publisher) {
+    auto spec = fusion::sim::WithTessellation(*fusion::SensorPreset("sr3000"), kCols, kRows);
+    fusion::sim::RangeSimulator simulator(fusion::sim::PaperBoardScene(), spec);
+    const Eigen::Isometry3d pose = fusion::sim::ForwardLookingPose(Eigen::Vector3d::Zero());
+    const auto end = std::chrono::steady_clock::now() + 20s;
+    for (std::uint64_t seq = 1; std::chrono::steady_clock::now() < end; ++seq) {
+      const auto frame = simulator.Capture(pose);
+      TestCloud cloud;
+      cloud.sequence_number = seq;
+      cloud.SetPose(pose);
+      cloud.width = frame.cols;
+      cloud.height = frame.rows;
+      cloud.xyz = frame.xyz;
+      cloud.beyond_range = frame.beyond_range;
+      EXPECT_TRUE(publisher.Publish(cloud));
+      std::this_thread::sleep_for(100ms);
+      std::uint64_t version = 0;
+      // A few frames at least: one frame leaves p(B) of a beam diffuse (the prior still weighs).
+      if (seq >= 5 && Occupancy(kOnBoard, &version).state() == v1::VOXEL_STATE_OCCUPIED &&
+          Occupancy(kInFront).state() == v1::VOXEL_STATE_FREE) {
+        return version;
+      }
+    }
+    ADD_FAILURE() << "the board did not appear within 20 s";
+    return 0;
+  }
+
+  unsigned domain_ = 0;
+  std::string dir_, snapshot_, config_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::FusionMap::Stub> stub_;
+};
+
+std::string FetchSnapshot(v1::FusionMap::Stub& stub, v1::GetSnapshotRequest::Format format,
+                          std::uint64_t* version) {
+  grpc::ClientContext context;
+  context.set_deadline(In(10s));
+  v1::GetSnapshotRequest request;
+  request.set_format(format);
+  auto reader = stub.GetSnapshot(&context, request);
+  std::string data;
+  v1::SnapshotChunk chunk;
+  while (reader->Read(&chunk)) {
+    EXPECT_EQ(chunk.offset(), data.size());
+    data += chunk.data();
+    *version = chunk.map_version();
+    EXPECT_EQ(chunk.total_bytes(),
+              chunk.offset() + chunk.data().size() +
+                  (chunk.total_bytes() - chunk.offset() - chunk.data().size()));
+  }
+  const auto status = reader->Finish();
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  return data;
+}
+
+bool Occupied(const octomap::OcTree& tree, const Eigen::Vector3d& p) {
+  const auto* node = tree.search(p.x(), p.y(), p.z());
+  return node != nullptr && tree.isNodeOccupied(node);
+}
+
+TEST_F(FusiondServiceTest, SurfacesAppearAndEveryQueryAnswersThem) {
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  TestPublisher publisher(domain_);
+  ASSERT_TRUE(publisher.ok()) << publisher.error();
+  ASSERT_TRUE(publisher.WaitForReader(10s));
+  const std::uint64_t version = MapTheBoard(publisher);
+  ASSERT_GT(version, 0u);
+
+  // Snapshot in both OctoMap formats, read back by OctoMap itself.
+  std::uint64_t snapshot_version = 0;
+  const std::string bt =
+      FetchSnapshot(*stub_, v1::GetSnapshotRequest::FORMAT_BT, &snapshot_version);
+  EXPECT_GE(snapshot_version, version);
+  octomap::OcTree from_bt(0.1);
+  std::istringstream bt_stream(bt);
+  ASSERT_TRUE(from_bt.readBinary(bt_stream));
+  EXPECT_DOUBLE_EQ(from_bt.getResolution(), 0.05);
+  EXPECT_TRUE(Occupied(from_bt, kOnBoard));
+  const std::string ot =
+      FetchSnapshot(*stub_, v1::GetSnapshotRequest::FORMAT_OT, &snapshot_version);
+  std::istringstream ot_stream(ot);
+  std::unique_ptr<octomap::AbstractOcTree> from_ot(octomap::AbstractOcTree::read(ot_stream));
+  auto* ot_tree = dynamic_cast<octomap::OcTree*>(from_ot.get());
+  ASSERT_NE(ot_tree, nullptr);
+  EXPECT_TRUE(Occupied(*ot_tree, kOnBoard));
+  EXPECT_FALSE(Occupied(*ot_tree, kInFront));
+
+  // Box query, all pages, equals the occupied leaves of the snapshot in that box.
+  std::set<std::tuple<double, double, double>> paged;
+  std::string token;
+  int pages = 0;
+  do {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::QueryBoxRequest request;
+    *request.mutable_min() = P({1.5, -1.0, -0.5});
+    *request.mutable_max() = P({2.0, 1.0, 1.0});
+    request.add_states(v1::VOXEL_STATE_OCCUPIED);
+    request.set_page_size(50);
+    request.set_page_token(token);
+    v1::QueryBoxResponse reply;
+    ASSERT_TRUE(stub_->QueryBox(&context, request, &reply).ok());
+    ASSERT_LE(reply.voxels_size(), 50);
+    for (const auto& v : reply.voxels()) {
+      EXPECT_EQ(v.state(), v1::VOXEL_STATE_OCCUPIED);
+      EXPECT_TRUE(paged.emplace(v.center().x(), v.center().y(), v.center().z()).second)
+          << "voxel returned twice";
+    }
+    token = reply.next_page_token();
+    ++pages;
+  } while (!token.empty() && pages < 1000);
+  EXPECT_GT(pages, 1);
+  EXPECT_GT(paged.size(), 100u);  // a 1.2 m x 1 m board at 5 cm
+
+  // A ray from the sensor along +x stops at the board.
+  {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::CastRayRequest request;
+    *request.mutable_origin() = P({0.0, 0.0, 0.2});
+    *request.mutable_direction() = P({1.0, 0.0, 0.0});
+    request.set_max_range_m(5.0);
+    request.set_ignore_unknown(true);  // the first 0.6 m (below r_min) are unknown
+    v1::CastRayResponse reply;
+    ASSERT_TRUE(stub_->CastRay(&context, request, &reply).ok());
+    EXPECT_TRUE(reply.hit());
+    EXPECT_NEAR(reply.end().x(), 1.75, 0.1);
+  }
+
+  // The board is found as a plane facing the sensor (normal along x, 1.75 m away).
+  {
+    grpc::ClientContext context;
+    context.set_deadline(In(20s));
+    v1::FindPlanesRequest request;
+    *request.mutable_region_min() = P({1.0, -1.0, -0.35});
+    *request.mutable_region_max() = P({2.5, 1.0, 1.0});
+    v1::FindPlanesResponse reply;
+    const auto status = stub_->FindPlanes(&context, request, &reply);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    ASSERT_GT(reply.planes_size(), 0);
+    EXPECT_GT(std::abs(reply.planes(0).normal().x()), 0.9);
+    EXPECT_NEAR(reply.planes(0).d_m(), 1.75, 0.1);
+  }
+
+  // The centre beam saw the board: its p(B) is a distribution with mass near 1.75 m.
+  {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::InspectBeamRequest request;
+    request.set_sensor_id("sr");
+    request.set_row(kRows / 2);
+    request.set_col(kCols / 2);
+    v1::InspectBeamResponse reply;
+    ASSERT_TRUE(stub_->InspectBeam(&context, request, &reply).ok());
+    EXPECT_TRUE(reply.touched());
+    ASSERT_EQ(reply.first_hit_size(), reply.cell_occupancy_size() + 1);
+    double sum = 0.0, near_board = 0.0;
+    for (int i = 0; i < reply.first_hit_size(); ++i) {
+      sum += reply.first_hit(i);
+      if (std::abs((i + 0.5) * reply.cell_size_m() - 1.75) < 0.1) near_board += reply.first_hit(i);
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-6);
+    // Most of the first-hit mass lies within 10 cm of the board.
+    EXPECT_GT(near_board, 0.5) << "p(B) near 1.75 m: " << near_board;
+  }
+
+  // The update stream starts with the whole map.
+  {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::StreamUpdatesRequest request;
+    auto reader = stub_->StreamUpdates(&context, request);
+    v1::MapUpdate update;
+    ASSERT_TRUE(reader->Read(&update));
+    EXPECT_TRUE(update.full());
+    EXPECT_GE(update.map_version(), version);
+    EXPECT_GT(update.voxels_size(), 100);
+    context.TryCancel();
+    reader->Finish();
+  }
+
+  const auto counters = SrCounters();
+  EXPECT_GT(counters.integrated(), 0u);
+  EXPECT_GT(counters.points_updated(), 0u);
+  EXPECT_EQ(counters.rejected(), 0u);
+
+  // Saved on request; OctoMap's own convert_octree reads the file.
+  {
+    grpc::ClientContext context;
+    context.set_deadline(In(10s));
+    v1::SaveMapResponse reply;
+    ASSERT_TRUE(stub_->SaveMap(&context, v1::SaveMapRequest(), &reply).ok());
+    EXPECT_EQ(reply.path(), snapshot_);
+    const std::string converted = dir_ + "/converted.bt";
+    const std::string command =
+        "/usr/bin/convert_octree '" + snapshot_ + "' '" + converted + "' > /dev/null 2>&1";
+    ASSERT_EQ(std::system(command.c_str()), 0);
+    octomap::OcTree tree(0.1);
+    ASSERT_TRUE(tree.readBinary(converted));
+    EXPECT_TRUE(Occupied(tree, kOnBoard));
+  }
+
+  // SIGTERM: exits 0 with a final snapshot; a restart serves the same map without new data.
+  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+  auto restarted = Start();
+  ASSERT_TRUE(restarted);
+  EXPECT_EQ(Occupancy(kOnBoard).state(), v1::VOXEL_STATE_OCCUPIED);
+  EXPECT_EQ(Occupancy(kInFront).state(), v1::VOXEL_STATE_FREE);
+  EXPECT_EQ(restarted->Stop(SIGTERM, 15s), 0);
+}
+
+TEST_F(FusiondServiceTest, KillNineRestartRestoresThePeriodicSnapshot) {
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  {
+    TestPublisher publisher(domain_);
+    ASSERT_TRUE(publisher.WaitForReader(10s));
+    ASSERT_GT(MapTheBoard(publisher), 0u);
+  }
+  // Wait for a periodic snapshot (interval 1 s) that holds the board.
+  const auto end = std::chrono::steady_clock::now() + 10s;
+  bool saved = false;
+  while (!saved && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(200ms);
+    std::unique_ptr<octomap::OcTree> tree;
+    if (fs::exists(snapshot_)) {
+      std::ifstream in(snapshot_, std::ios::binary);
+      std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(in));
+      auto* octree = dynamic_cast<octomap::OcTree*>(read.get());
+      saved = octree != nullptr && Occupied(*octree, kOnBoard);
+    }
+  }
+  ASSERT_TRUE(saved) << "no periodic snapshot with the board in " << snapshot_;
+  EXPECT_EQ(fusiond->Stop(SIGKILL, 10s), 128 + SIGKILL);
+  auto restarted = Start();
+  ASSERT_TRUE(restarted);
+  EXPECT_EQ(Occupancy(kOnBoard).state(), v1::VOXEL_STATE_OCCUPIED);
+  EXPECT_EQ(restarted->Stop(SIGTERM, 15s), 0);
+}
+
+TEST_F(FusiondServiceTest, CorruptSnapshotIsSetAsideAndNotOverwritten) {
+  std::ofstream(snapshot_) << "# Octomap OcTree file\nid OcTree\nsize 1000\nres 0.05\ndata\nxyz";
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  EXPECT_EQ(Stats().map_leaves(), 0u);
+  int corrupt_files = 0;
+  for (const auto& entry : fs::directory_iterator(dir_)) {
+    if (entry.path().filename().string().rfind("map.ot.corrupt-", 0) == 0) {
+      ++corrupt_files;
+      std::ifstream in(entry.path());
+      std::string first;
+      std::getline(in, first);
+      EXPECT_EQ(first, "# Octomap OcTree file");  // the original bytes, kept
+    }
+  }
+  EXPECT_EQ(corrupt_files, 1);
+  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+  EXPECT_TRUE(fs::exists(snapshot_));  // a new, valid snapshot
+  std::ifstream in(snapshot_, std::ios::binary);
+  std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(in));
+  EXPECT_NE(dynamic_cast<octomap::OcTree*>(read.get()), nullptr);
+}
+
+grpc::StatusCode QueryPointsStatus(v1::FusionMap::Stub& stub, const v1::QueryPointsRequest& r) {
+  grpc::ClientContext context;
+  context.set_deadline(In(5s));
+  v1::QueryPointsResponse reply;
+  return stub.QueryPoints(&context, r, &reply).error_code();
+}
+
+grpc::StatusCode QueryBoxStatus(v1::FusionMap::Stub& stub, const v1::QueryBoxRequest& r,
+                                std::chrono::milliseconds deadline = 5000ms) {
+  grpc::ClientContext context;
+  context.set_deadline(In(deadline));
+  v1::QueryBoxResponse reply;
+  return stub.QueryBox(&context, r, &reply).error_code();
+}
+
+TEST_F(FusiondServiceTest, MalformedCloudsAndBadRequestsAreRejectedWhileServing) {
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  TestPublisher publisher(domain_);
+  ASSERT_TRUE(publisher.WaitForReader(10s));
+
+  const auto good = [] {
+    TestCloud c;
+    c.width = 2;
+    c.xyz = {0.f, 0.f, 1.5f, 0.1f, 0.f, 1.5f};
+    return c;
+  };
+  // One valid cloud first: once it is integrated, both sides have discovered each other.
+  auto warm_up = good();
+  const auto warm_end = std::chrono::steady_clock::now() + 10s;
+  while (SrCounters().integrated() == 0 && std::chrono::steady_clock::now() < warm_end) {
+    ASSERT_TRUE(publisher.Publish(warm_up));
+    std::this_thread::sleep_for(100ms);
+  }
+  const std::uint64_t integrated_before = SrCounters().integrated();
+  ASSERT_GT(integrated_before, 0u);
+  std::vector<std::pair<std::string, TestCloud>> bad;
+  bad.emplace_back("point_count_mismatch", good());
+  bad.back().second.xyz.pop_back();
+  bad.emplace_back("beyond_range_mismatch", good());
+  bad.back().second.beyond_range = {0, 0, 1};
+  bad.emplace_back("non_finite_pose", good());
+  bad.back().second.tx = NAN;
+  bad.emplace_back("non_unit_quaternion", good());
+  bad.back().second.qw = 0.5;
+  bad.emplace_back("absurd_point_count", good());
+  bad.back().second.width = 1000;
+  bad.back().second.height = 1000;
+  bad.emplace_back("absurd_translation", good());
+  bad.back().second.tz = 1e9;
+  bad.emplace_back("unknown_sensor", good());
+  bad.back().second.sensor_id = "ghost";
+  for (auto& [reason, cloud] : bad) {
+    ASSERT_TRUE(publisher.Publish(cloud)) << reason;
+    std::this_thread::sleep_for(50ms);
+  }
+  auto valid = good();
+  valid.sequence_number = 99;
+  ASSERT_TRUE(publisher.Publish(valid));
+
+  // Counted per reason, on the sensor and in the stats; the valid cloud still integrates.
+  v1::SensorCounters counters;
+  const auto end = std::chrono::steady_clock::now() + 10s;
+  while (std::chrono::steady_clock::now() < end) {
+    counters = SrCounters();
+    if (counters.rejected() == 6 && counters.integrated() == integrated_before + 1) break;
+    std::this_thread::sleep_for(50ms);
+  }
+  EXPECT_EQ(counters.rejected(), 6u);
+  EXPECT_EQ(counters.integrated(), integrated_before + 1);
+  EXPECT_EQ(counters.last_sequence_number(), 99u);
+  for (const auto& [reason, cloud] : bad) {
+    if (reason == "unknown_sensor") continue;
+    EXPECT_EQ(
+        counters.rejected_by_reason().count(reason) ? counters.rejected_by_reason().at(reason) : 0,
+        1u)
+        << reason;
+  }
+  const auto stats = Stats();
+  EXPECT_EQ(stats.clouds_rejected(), 7u);
+  ASSERT_EQ(stats.rejected_by_reason().count("unknown_sensor"), 1u);
+  EXPECT_EQ(stats.rejected_by_reason().at("unknown_sensor"), 1u);
+
+  // Bad requests get the status code that fits.
+  v1::QueryPointsRequest nan_point;
+  *nan_point.add_points() = P({NAN, 0, 0});
+  EXPECT_EQ(QueryPointsStatus(*stub_, nan_point), grpc::StatusCode::INVALID_ARGUMENT);
+  v1::QueryPointsRequest too_many;
+  for (int i = 0; i < 1001; ++i) *too_many.add_points() = P({0, 0, 0});
+  EXPECT_EQ(QueryPointsStatus(*stub_, too_many), grpc::StatusCode::RESOURCE_EXHAUSTED);
+
+  v1::QueryBoxRequest box;
+  *box.mutable_min() = P({-100, -100, -100});
+  *box.mutable_max() = P({100, 100, 100});
+  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  *box.mutable_min() = P({1, 0, 0});
+  *box.mutable_max() = P({0, 1, 1});
+  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::INVALID_ARGUMENT);
+  *box.mutable_min() = P({0, 0, 0});
+  box.set_page_token("garbage");
+  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::INVALID_ARGUMENT);
+  box.clear_page_token();
+  box.set_page_size(1u << 30);
+  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  // A page of 800 000 unknown voxels with a deadline too short to build it (the server checks
+  // the deadline while walking; the client would also give up on its own).
+  box.set_page_size(0);
+  box.add_states(v1::VOXEL_STATE_UNKNOWN);
+  *box.mutable_max() = P({4.95, 4.95, 3.95});
+  EXPECT_EQ(QueryBoxStatus(*stub_, box, 20ms), grpc::StatusCode::DEADLINE_EXCEEDED);
+  // The same box in pages of 1000 answers in time.
+  box.set_page_size(1000);
+  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::OK);
+
+  {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::CastRayRequest ray;
+    *ray.mutable_direction() = P({0, 0, 0});
+    ray.set_max_range_m(1.0);
+    v1::CastRayResponse reply;
+    EXPECT_EQ(stub_->CastRay(&context, ray, &reply).error_code(),
+              grpc::StatusCode::INVALID_ARGUMENT);
+  }
+  for (const auto& [sensor, row] : {std::pair<std::string, unsigned>{"ghost", 0},
+                                    std::pair<std::string, unsigned>{"sr", kRows}}) {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    v1::InspectBeamRequest request;
+    request.set_sensor_id(sensor);
+    request.set_row(row);
+    v1::InspectBeamResponse reply;
+    EXPECT_EQ(stub_->InspectBeam(&context, request, &reply).error_code(),
+              grpc::StatusCode::NOT_FOUND)
+        << sensor;
+  }
+
+  // Still healthy and serving.
+  auto health = grpc::health::v1::Health::NewStub(channel_);
+  grpc::ClientContext context;
+  context.set_deadline(In(5s));
+  grpc::health::v1::HealthCheckResponse reply;
+  ASSERT_TRUE(health->Check(&context, grpc::health::v1::HealthCheckRequest(), &reply).ok());
+  EXPECT_EQ(reply.status(), grpc::health::v1::HealthCheckResponse::SERVING);
+  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+}
+
+TEST_F(FusiondServiceTest, RefusesABadConfigurationNamingTheField) {
+  const std::pair<const char*, const char*> cases[] = {
+      // Regular expressions: the message must start with the field's path.
+      {"sensors { id: \"sr\" preset: \"sr3000\" fov_h_deg: -3 }",
+       R"(fusiond: sensors\[0\]\.fov_h_deg: )"},
+      {"map { fusion_rule: \"average\" }", R"(fusiond: map\.fusion_rule: )"},
+      {"ingest { reliability: \"sometimes\" }", R"(fusiond: ingest\.reliability: )"},
+  };
+  for (const auto& [text, field] : cases) {
+    std::ofstream(config_) << text << "\n";
+    // Through a shell: the message goes to stderr.
+    Subprocess bad({"/bin/sh", "-c", kFusiond + " --config " + config_ + " 2>&1"});
+    EXPECT_TRUE(bad.WaitForOutput(field, 10s)) << text << " gave: " << bad.output();
+    EXPECT_EQ(bad.Wait(10s), 2) << text;
+  }
+}
+
+}  // namespace

@@ -1,0 +1,208 @@
+// Sample validation, the bounded per-sensor queues and the snapshot hub's change log.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "fusion/service/conversions.h"
+#include "fusion/service/ingest_queues.h"
+#include "fusion/service/map_snapshot.h"
+#include "fusion/service/validation.h"
+
+namespace fusion::service {
+namespace {
+
+// A valid 2 x 1 cloud of sensor "sr"; tests break one thing at a time.
+struct Sample {
+  std::string id = "sr";
+  std::vector<float> xyz = {0.f, 0.f, 1.f, 0.f, 0.1f, 1.f};
+  std::vector<std::uint8_t> beyond;
+  fusion_dds_PointCloud msg{};
+  Sample() {
+    msg.width = 2;
+    msg.height = 1;
+    msg.T_world_sensor.qw = 1.0;
+  }
+  const fusion_dds_PointCloud& Get() {
+    msg.sensor_id = id.data();
+    msg.xyz._buffer = xyz.data();
+    msg.xyz._length = static_cast<std::uint32_t>(xyz.size());
+    msg.beyond_range._buffer = beyond.empty() ? nullptr : beyond.data();
+    msg.beyond_range._length = static_cast<std::uint32_t>(beyond.size());
+    return msg;
+  }
+};
+
+std::optional<RejectReason> Check(Sample& s, IngestLimits limits = {}) {
+  std::string detail;
+  const auto reason = ValidateSample(
+      s.Get(), limits, [](const std::string& id) { return id == "sr"; }, &detail);
+  if (reason) {
+    EXPECT_FALSE(detail.empty());
+  }
+  return reason;
+}
+
+TEST(ServiceIngestTest, ValidSampleIsAcceptedAndConverted) {
+  Sample s;
+  s.beyond = {0, 1};
+  s.msg.T_world_sensor.tx = 2.0;
+  EXPECT_EQ(Check(s), std::nullopt);
+  const Cloud cloud = CloudFromDds(s.Get());
+  EXPECT_EQ(cloud.sensor_id, "sr");
+  EXPECT_EQ(cloud.xyz.size(), 6u);
+  EXPECT_EQ(cloud.beyond_range.size(), 2u);
+  EXPECT_DOUBLE_EQ(cloud.T_world_published.translation().x(), 2.0);
+}
+
+TEST(ServiceIngestTest, EveryMalformationHasItsReason) {
+  {
+    Sample s;
+    s.id = "";
+    EXPECT_EQ(Check(s), RejectReason::kEmptySensorId);
+  }
+  {
+    Sample s;
+    s.id = "ghost";
+    EXPECT_EQ(Check(s), RejectReason::kUnknownSensor);
+  }
+  {
+    Sample s;
+    s.xyz.pop_back();
+    EXPECT_EQ(Check(s), RejectReason::kPointCountMismatch);
+  }
+  {
+    Sample s;
+    s.msg.height = 2;  // 4 points declared, 2 sent
+    EXPECT_EQ(Check(s), RejectReason::kPointCountMismatch);
+  }
+  {
+    Sample s;
+    s.beyond = {1};
+    EXPECT_EQ(Check(s), RejectReason::kBeyondRangeMismatch);
+  }
+  {
+    Sample s;
+    s.msg.width = 0;
+    EXPECT_EQ(Check(s), RejectReason::kTooManyPoints);
+  }
+  {
+    Sample s;
+    s.msg.width = 0xffffffffu;  // width * height must not overflow into a small number
+    s.msg.height = 0xffffffffu;
+    EXPECT_EQ(Check(s), RejectReason::kTooManyPoints);
+  }
+  {
+    Sample s;
+    IngestLimits limits;
+    limits.max_points = 1;
+    EXPECT_EQ(Check(s, limits), RejectReason::kTooManyPoints);
+  }
+  {
+    Sample s;
+    s.msg.T_world_sensor.qz = std::numeric_limits<double>::infinity();
+    EXPECT_EQ(Check(s), RejectReason::kNonFinitePose);
+  }
+  {
+    Sample s;
+    s.msg.T_world_sensor.ty = std::nan("");
+    EXPECT_EQ(Check(s), RejectReason::kNonFinitePose);
+  }
+  {
+    Sample s;
+    s.msg.T_world_sensor.qw = 0.99;  // |q| = 0.99: outside the 1e-3 tolerance
+    EXPECT_EQ(Check(s), RejectReason::kNonUnitQuaternion);
+    s.msg.T_world_sensor.qw = 0.9999;  // inside
+    EXPECT_EQ(Check(s), std::nullopt);
+  }
+  {
+    Sample s;
+    s.msg.T_world_sensor.tz = -1e6;
+    EXPECT_EQ(Check(s), RejectReason::kAbsurdTranslation);
+  }
+}
+
+TEST(ServiceIngestTest, ReasonNamesAreDistinct) {
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < kRejectReasonCount; ++i) {
+    names.insert(RejectReasonName(static_cast<RejectReason>(i)));
+  }
+  EXPECT_EQ(names.size(), kRejectReasonCount);
+  EXPECT_EQ(names.count("unknown_reason"), 0u);
+}
+
+Cloud MakeCloud(const std::string& id, std::uint64_t seq) {
+  Cloud c;
+  c.sensor_id = id;
+  c.sequence_number = seq;
+  return c;
+}
+
+TEST(ServiceIngestTest, QueuesKeepTheNewestAndCountDrops) {
+  IngestQueues queues({{"a", 2}, {"b", 1}});
+  for (std::uint64_t seq = 1; seq <= 5; ++seq) queues.Push(MakeCloud("a", seq));
+  queues.Push(MakeCloud("b", 7));
+  queues.Push(MakeCloud("ghost", 1));  // not configured: ignored
+  EXPECT_EQ(queues.Pending(), 3u);
+  std::vector<Cloud> out;
+  ASSERT_TRUE(queues.PopAll(&out, std::chrono::steady_clock::now()));
+  ASSERT_EQ(out.size(), 3u);
+  EXPECT_EQ(out[0].sequence_number, 4u);  // oldest first within a sensor
+  EXPECT_EQ(out[1].sequence_number, 5u);
+  EXPECT_EQ(out[2].sequence_number, 7u);
+  EXPECT_EQ(queues.counters("a")->received, 5u);
+  EXPECT_EQ(queues.counters("a")->dropped, 3u);
+  EXPECT_EQ(queues.counters("b")->dropped, 0u);
+  EXPECT_EQ(queues.counters("ghost"), nullptr);
+
+  queues.CountRejected("a", RejectReason::kNonFinitePose);
+  queues.CountRejected("ghost", RejectReason::kUnknownSensor);
+  EXPECT_EQ(queues.counters("a")->rejected.Total(), 1u);
+  EXPECT_EQ(queues.all_rejected().Total(), 2u);
+
+  out.clear();
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_FALSE(queues.PopAll(&out, start + std::chrono::milliseconds(30)));
+  EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(25));
+}
+
+std::shared_ptr<const MapSnapshot> Version(std::uint64_t v) {
+  auto s = std::make_shared<MapSnapshot>();
+  s->version = v;
+  s->tree = std::make_shared<octomap::OcTree>(0.1);
+  return s;
+}
+
+TEST(ServiceIngestTest, HubLogsChangesAndForgetsTheOldest) {
+  SnapshotHub hub(/*max_logged_keys=*/3);
+  int notified = 0;
+  const int id = hub.Subscribe([&] { ++notified; });
+  const octomap::OcTreeKey a(1, 1, 1), b(2, 2, 2), c(3, 3, 3);
+  hub.Publish(Version(1), {a, b}, false);
+  hub.Publish(Version(2), {b}, false);
+  EXPECT_EQ(hub.Current()->version, 2u);
+  std::vector<octomap::OcTreeKey> keys;
+  ASSERT_TRUE(hub.ChangedSince(0, &keys));
+  EXPECT_EQ(keys.size(), 2u);  // deduplicated
+  keys.clear();
+  ASSERT_TRUE(hub.ChangedSince(1, &keys));
+  ASSERT_EQ(keys.size(), 1u);
+  EXPECT_EQ(keys[0], b);
+  hub.Publish(Version(3), {c}, false);  // 4 keys > 3: version 1 is forgotten
+  keys.clear();
+  EXPECT_FALSE(hub.ChangedSince(0, &keys));
+  EXPECT_TRUE(hub.ChangedSince(1, &keys));
+  hub.Publish(Version(4), {}, true);  // reset: nothing before 4 is known
+  EXPECT_FALSE(hub.ChangedSince(3, &keys));
+  EXPECT_EQ(notified, 4);
+  hub.Unsubscribe(id);
+  hub.Close();
+  EXPECT_EQ(notified, 4);
+  EXPECT_TRUE(hub.closed());
+}
+
+}  // namespace
+}  // namespace fusion::service

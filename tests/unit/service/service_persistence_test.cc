@@ -1,0 +1,102 @@
+// Snapshot files: atomic write, load, truncated / garbage files set aside, resolution checked.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "fusion/service/persistence.h"
+
+namespace fusion::service {
+namespace {
+
+namespace fs = std::filesystem;
+
+class ServicePersistenceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = ::testing::TempDir() + "service_persistence_" +
+           ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    path_ = dir_ + "/map.ot";
+    tree_.updateNode(octomap::point3d(1.0f, 0.0f, 0.0f), true);
+    tree_.updateNode(octomap::point3d(0.5f, 0.0f, 0.0f), false);
+  }
+  int CountCorrupt() const {
+    int n = 0;
+    for (const auto& e : fs::directory_iterator(dir_)) {
+      n += e.path().filename().string().rfind("map.ot.corrupt-", 0) == 0;
+    }
+    return n;
+  }
+  std::string dir_, path_;
+  octomap::OcTree tree_{0.05};
+};
+
+TEST_F(ServicePersistenceTest, WritesAtomicallyAndLoadsBack) {
+  std::uint64_t bytes = 0;
+  std::string error;
+  ASSERT_TRUE(WriteSnapshotFile(tree_, path_, &bytes, &error)) << error;
+  EXPECT_EQ(bytes, fs::file_size(path_));
+  for (const auto& e : fs::directory_iterator(dir_)) {
+    EXPECT_EQ(e.path().filename(), "map.ot") << "temporary file left behind";
+  }
+  std::unique_ptr<octomap::OcTree> loaded;
+  ASSERT_EQ(LoadSnapshotFile(path_, 0.05, &loaded, &error), LoadStatus::kLoaded) << error;
+  EXPECT_EQ(loaded->size(), tree_.size());
+  EXPECT_TRUE(loaded->isNodeOccupied(loaded->search(1.0, 0.0, 0.0)));
+  EXPECT_FALSE(loaded->isNodeOccupied(loaded->search(0.5, 0.0, 0.0)));
+  // The layout the truncation check relies on: 5 bytes per node after the header.
+  const std::string data = SerializeOt(tree_);
+  const auto start = data.find("\ndata\n");
+  ASSERT_NE(start, std::string::npos);
+  EXPECT_EQ(data.size() - (start + 6), 5 * tree_.size());
+}
+
+TEST_F(ServicePersistenceTest, MissingFileIsNotAnError) {
+  std::unique_ptr<octomap::OcTree> loaded;
+  std::string error;
+  EXPECT_EQ(LoadSnapshotFile(path_, 0.05, &loaded, &error), LoadStatus::kMissing);
+}
+
+TEST_F(ServicePersistenceTest, TruncatedAndGarbageFilesAreSetAside) {
+  const std::string data = SerializeOt(tree_);
+  for (const std::string& bad :
+       {data.substr(0, data.size() - 3), std::string("garbage\n"), data + "extra"}) {
+    std::ofstream(path_, std::ios::binary) << bad;
+    std::unique_ptr<octomap::OcTree> loaded;
+    std::string message;
+    const int before = CountCorrupt();
+    EXPECT_EQ(LoadSnapshotFile(path_, 0.05, &loaded, &message), LoadStatus::kCorrupt);
+    EXPECT_EQ(loaded, nullptr);
+    EXPECT_NE(message.find("moved to"), std::string::npos) << message;
+    EXPECT_FALSE(fs::exists(path_));
+    // Same-second names collide: the test renames the set-aside file to keep each one.
+    for (const auto& e : fs::directory_iterator(dir_)) {
+      if (e.path().filename().string().rfind("map.ot.corrupt-", 0) == 0 &&
+          e.path().filename().string().find("-kept") == std::string::npos) {
+        fs::rename(e.path(), e.path().string() + "-kept" + std::to_string(before));
+      }
+    }
+    EXPECT_EQ(CountCorrupt(), before + 1);
+  }
+}
+
+TEST_F(ServicePersistenceTest, OtherResolutionIsRefusedNotSetAside) {
+  std::string error;
+  ASSERT_TRUE(WriteSnapshotFile(tree_, path_, nullptr, &error)) << error;
+  std::unique_ptr<octomap::OcTree> loaded;
+  EXPECT_EQ(LoadSnapshotFile(path_, 0.1, &loaded, &error), LoadStatus::kError);
+  EXPECT_NE(error.find("resolution"), std::string::npos) << error;
+  EXPECT_TRUE(fs::exists(path_));
+}
+
+TEST_F(ServicePersistenceTest, UnwritableDirectoryIsReported) {
+  std::string error;
+  EXPECT_FALSE(WriteSnapshotFile(tree_, dir_ + "/no/such/dir/map.ot", nullptr, &error));
+  EXPECT_NE(error.find("open"), std::string::npos) << error;
+}
+
+}  // namespace
+}  // namespace fusion::service
