@@ -120,8 +120,9 @@ fusion::v1::ServiceConfig DefaultConfig() {
   map->set_pose_tolerance_m(0.01);
   map->set_pose_tolerance_deg(1.0);
   map->set_render_interval_ms(200);
-  map->set_occupied_threshold(0.5);
-  map->set_free_threshold(0.5);
+  // A dead band around 0.5: voxels the renderer wrote with next to no evidence stay unknown.
+  map->set_occupied_threshold(0.55);
+  map->set_free_threshold(0.45);
   map->set_beam_cell_size_m(0.002);
   auto* ingest = config.mutable_ingest();
   ingest->set_reliability("best_effort");

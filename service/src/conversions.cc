@@ -144,6 +144,11 @@ std::optional<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapCo
   }
   options.beam_grid.cell_size_m = c.beam_cell_size_m();
   options.render.resolution_m = options.resolution_m;
+  if (!(c.max_range_m() >= 0.0 && std::isfinite(c.max_range_m()))) {
+    *error = "max_range_m: must be finite and >= 0 (0: each sensor's full range)";
+    return std::nullopt;
+  }
+  if (c.max_range_m() > 0.0) options.render.max_range_m = c.max_range_m();
   return options;
 }
 

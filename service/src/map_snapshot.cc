@@ -4,9 +4,10 @@
 
 namespace fusion::service {
 
-SnapshotHub::SnapshotHub(std::size_t max_logged_keys) : max_logged_keys_(max_logged_keys) {
+SnapshotHub::SnapshotHub(std::size_t max_logged_keys, double resolution_m)
+    : max_logged_keys_(max_logged_keys) {
   auto empty = std::make_shared<MapSnapshot>();
-  empty->tree = std::make_shared<octomap::OcTree>(0.05);
+  empty->tree = std::make_shared<octomap::OcTree>(resolution_m);
   current_ = std::move(empty);
 }
 

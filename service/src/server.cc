@@ -19,7 +19,7 @@ namespace fusion::service {
 struct FusionServer::Parts {
   ServiceState state;
   std::unique_ptr<IngestQueues> queues;
-  SnapshotHub hub;
+  std::unique_ptr<SnapshotHub> hub;
   std::unique_ptr<FusionWorker> worker;
   std::unique_ptr<Persister> persister;
   std::unique_ptr<DdsIngest> ingest;
@@ -54,7 +54,10 @@ bool FusionServer::Start(std::string* error) {
   p.state.thresholds = ThresholdsFromConfig(config_.map());
   p.queues = std::make_unique<IngestQueues>(queue_specs);
   p.state.queues = p.queues.get();
-  p.state.hub = &p.hub;
+  // Queries before the first render see an empty map at the configured resolution.
+  p.hub = std::make_unique<SnapshotHub>(SnapshotHub::kDefaultMaxLoggedKeys,
+                                        config_.map().resolution_m());
+  p.state.hub = p.hub.get();
 
   // The last snapshot, if any: loaded, or set aside when corrupt.
   const auto& persistence = config_.persistence();
@@ -84,13 +87,13 @@ bool FusionServer::Start(std::string* error) {
   worker_options.thresholds = p.state.thresholds;
   worker_options.render_interval = std::chrono::milliseconds(config_.map().render_interval_ms());
   p.worker =
-      std::make_unique<FusionWorker>(worker_options, p.state.sensors, p.queues.get(), &p.hub);
+      std::make_unique<FusionWorker>(worker_options, p.state.sensors, p.queues.get(), p.hub.get());
   const bool loaded = base != nullptr;
   if (!p.worker->Start(std::move(base), error)) return false;
   p.state.worker = p.worker.get();
   p.persister = std::make_unique<Persister>(persistence.path(),
-                                            std::chrono::seconds(persistence.interval_s()), &p.hub);
-  if (loaded) p.persister->set_saved_version(p.hub.Current()->version);
+                                            std::chrono::seconds(persistence.interval_s()), p.hub.get());
+  if (loaded) p.persister->set_saved_version(p.hub->Current()->version);
   p.persister->Start();
   p.state.persister = p.persister.get();
 
@@ -131,7 +134,7 @@ void FusionServer::Shutdown(std::chrono::milliseconds deadline) {
   Parts& p = *parts_;
   p.state.shutting_down = true;
   if (server_) server_->GetHealthCheckService()->SetServingStatus(false);
-  p.hub.Close();  // ends the update streams
+  p.hub->Close();  // ends the update streams
   if (server_) {
     server_->Shutdown(std::chrono::system_clock::now() + deadline);
     server_.reset();

@@ -93,6 +93,7 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
       {"map { pose_tolerance_deg: 500 }", "map.pose_tolerance_deg"},
       {"map { free_threshold: 0.7 occupied_threshold: 0.6 }", "map.free_threshold"},
       {"map { beam_cell_size_m: 5 }", "map.beam_cell_size_m"},
+      {"map { max_range_m: -1 }", "map.max_range_m"},
       {"ingest { reliability: \"sometimes\" }", "ingest.reliability"},
       {"ingest { quaternion_tolerance: 0.9 }", "ingest.quaternion_tolerance"},
       {"limits { snapshot_chunk_bytes: 100000000 }", "limits.snapshot_chunk_bytes"},

@@ -22,7 +22,10 @@ struct MapSnapshot {
 class SnapshotHub {
  public:
   // Bounds of the change log: older entries are forgotten (subscribers then get the full map).
-  explicit SnapshotHub(std::size_t max_logged_keys = 4'000'000);
+  static constexpr std::size_t kDefaultMaxLoggedKeys = 4'000'000;
+  // Until the first Publish, Current() is an empty map of resolution_m.
+  explicit SnapshotHub(std::size_t max_logged_keys = kDefaultMaxLoggedKeys,
+                       double resolution_m = 0.05);
 
   [[nodiscard]] std::shared_ptr<const MapSnapshot> Current() const;
   // Publishes a new version. `changed` are the keys whose value changed since the previous
