@@ -8,6 +8,8 @@ namespace fusion::service {
 namespace {
 
 constexpr int kMaxSamplesPerTake = 16;
+// Samples a reliable reader holds before DDS flow control holds the writers back.
+constexpr int32_t kReliableReaderSamples = 64;
 
 std::string DdsError(const char* call, dds_return_t rc) {
   return std::string(call) + ": " + dds_strretcode(rc);
@@ -33,9 +35,17 @@ bool DdsIngest::Start(dds_entity_t participant, std::string* error) {
   } else {
     dds_qset_reliability(qos, DDS_RELIABILITY_BEST_EFFORT, 0);
   }
-  // Keyed by sensor_id: keep the newest cloud of every sensor (the bounded queues behind
-  // this reader do the rest).
-  dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 1);
+  if (options_.reliable) {
+    // Lossless: keep every sample; while the queues are full the ingest thread waits, the
+    // reader's cache fills up to its limit and DDS flow control holds the writer back.
+    dds_qset_history(qos, DDS_HISTORY_KEEP_ALL, 0);
+    dds_qset_resource_limits(qos, kReliableReaderSamples, DDS_LENGTH_UNLIMITED,
+                             DDS_LENGTH_UNLIMITED);
+  } else {
+    // Keyed by sensor_id: keep the newest cloud of every sensor (the bounded queues behind
+    // this reader do the rest).
+    dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 1);
+  }
   dds_qset_durability(qos, DDS_DURABILITY_VOLATILE);
   reader_ = dds_create_reader(participant, topic_, qos, nullptr);
   dds_delete_qos(qos);
@@ -118,7 +128,11 @@ void DdsIngest::Handle(const fusion_dds_PointCloud& sample) {
     LogRejection(*reason, sensor_id, detail);
     return;
   }
-  queues_->Push(CloudFromDds(sample));
+  if (options_.reliable) {
+    (void)queues_->PushWait(CloudFromDds(sample), stop_);
+  } else {
+    queues_->Push(CloudFromDds(sample));
+  }
 }
 
 void DdsIngest::LogRejection(RejectReason reason, const std::string& sensor_id,

@@ -130,7 +130,7 @@ void FusionWorker::RenderAndPublishLocked() {
     return;
   }
   dirty_ = false;
-  renders_.fetch_add(1, std::memory_order_relaxed);
+  const std::uint64_t integrated = integrated_.load();
   auto since = map_->ChangedKeysSince(rendered_map_version_);
   std::vector<octomap::OcTreeKey> changed;
   const bool full_refresh = !since;
@@ -163,6 +163,9 @@ void FusionWorker::RenderAndPublishLocked() {
   }
   const std::size_t changed_count = changed.size();
   PublishLocked(std::move(changed), /*reset=*/full_refresh);
+  // Counted once published: a client that sees these numbers can query what they count.
+  in_map_.store(integrated);
+  renders_.fetch_add(1);
   spdlog::debug(
       "worker: rendered version {} ({} voxels changed) in {:.1f} ms",
       version_offset_ + rendered_map_version_, changed_count,

@@ -58,6 +58,27 @@ void IngestQueues::Push(Cloud cloud) {
   cv_.notify_one();
 }
 
+bool IngestQueues::PushWait(Cloud cloud, const std::atomic<bool>& stop) {
+  const auto it = slots_.find(cloud.sensor_id);
+  if (it == slots_.end()) return false;  // callers validate first
+  Slot& slot = *it->second;
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    slot.counters.received.fetch_add(1, std::memory_order_relaxed);
+    slot.counters.last_sequence_number.store(cloud.sequence_number, std::memory_order_relaxed);
+    while (slot.queue.size() >= slot.depth) {
+      if (stop.load()) {
+        slot.counters.dropped.fetch_add(1, std::memory_order_relaxed);
+        return false;
+      }
+      space_cv_.wait_for(lock, std::chrono::milliseconds(100));
+    }
+    slot.queue.push_back(std::move(cloud));
+  }
+  cv_.notify_one();
+  return true;
+}
+
 bool IngestQueues::PopAll(std::vector<Cloud>* out, std::chrono::steady_clock::time_point until) {
   std::unique_lock<std::mutex> lock(mutex_);
   const auto ready = [this] {
@@ -73,6 +94,8 @@ bool IngestQueues::PopAll(std::vector<Cloud>* out, std::chrono::steady_clock::ti
     for (auto& cloud : entry.second->queue) out->push_back(std::move(cloud));
     entry.second->queue.clear();
   }
+  lock.unlock();
+  space_cv_.notify_all();
   return !out->empty();
 }
 

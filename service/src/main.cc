@@ -1,4 +1,5 @@
 // fusiond: the forward-model occupancy fusion service.
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include <csignal>
@@ -113,6 +114,8 @@ int main(int argc, char** argv) {
     }
   }
   if (!fusion::service::ValidateConfig(config, &error)) return Fail(error);
+  // Logs go to stderr: stdout carries only the "listening on" line a parent may read.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("fusiond"));
   spdlog::set_level(spdlog::level::from_str(config.log_level()));
 
   // Block the stop signals in every thread; main waits for them below.

@@ -274,6 +274,7 @@ grpc::ServerUnaryReactor* MapService::GetStats(grpc::CallbackServerContext* cont
     reply->set_clouds_dropped(dropped);
     reply->set_clouds_integrated(state_->worker->integrated());
     reply->set_renders(state_->worker->renders());
+    reply->set_clouds_in_map(state_->worker->in_map());
     reply->set_map_leaves(snapshot->tree->getNumLeafNodes());
     reply->set_map_memory_bytes(snapshot->tree->memoryUsage());
     reply->set_resolution_m(snapshot->tree->getResolution());

@@ -91,8 +91,8 @@ bool FusionServer::Start(std::string* error) {
   const bool loaded = base != nullptr;
   if (!p.worker->Start(std::move(base), error)) return false;
   p.state.worker = p.worker.get();
-  p.persister = std::make_unique<Persister>(persistence.path(),
-                                            std::chrono::seconds(persistence.interval_s()), p.hub.get());
+  p.persister = std::make_unique<Persister>(
+      persistence.path(), std::chrono::seconds(persistence.interval_s()), p.hub.get());
   if (loaded) p.persister->set_saved_version(p.hub->Current()->version);
   p.persister->Start();
   p.state.persister = p.persister.get();

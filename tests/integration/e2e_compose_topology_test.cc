@@ -21,116 +21,17 @@
 #include <thread>
 #include <vector>
 
-#include "../support/subprocess.h"
+#include "../support/e2e_service.h"
 #include "fusion/v1/map_service.grpc.pb.h"
 
 namespace {
 
+using fusion::testing::E2eService;
+using fusion::testing::RunTool;
 using fusion::testing::Subprocess;
 using namespace std::chrono_literals;
 namespace v1 = fusion::v1;
 namespace fs = std::filesystem;
-
-const std::string kBuild = FUSION_BINARY_DIR;
-const std::string kTools = kBuild + "/clients/";
-// The repository root: FUSION_SHARED_DATA_DIR is "<repo>/../shared/data".
-const std::string kRepo = [] {
-  const std::string dir = FUSION_SHARED_DATA_DIR;
-  return dir.substr(0, dir.size() - std::string("/../shared/data").size());
-}();
-
-// Runs a tool to completion; returns its exit code (-1: did not finish) and stdout.
-int RunTool(std::vector<std::string> argv, std::string* out = nullptr,
-            std::chrono::seconds timeout = 60s) {
-  argv[0] = kTools + argv[0];
-  Subprocess process(argv);
-  if (!process.started()) return -1;
-  process.WaitForOutput("(?!)", timeout);  // drains stdout until the child exits
-  const int code = process.Wait(5000ms);
-  if (out) *out = process.output();
-  return code;
-}
-
-// A fusiond process with its own temporary folder and DDS domain, and gRPC stubs to it.
-class E2eService : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = ::testing::TempDir() + "e2e_" + std::to_string(getpid()) + "_" +
-           ::testing::UnitTest::GetInstance()->current_test_info()->name();
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    domain_ = fusion::testing::PrivateDomainId();
-  }
-  void TearDown() override {
-    if (!dir_.empty()) fs::remove_all(dir_);
-  }
-
-  // Starts fusiond with `config` (written to the temporary folder) on 127.0.0.1:0 in the
-  // test's DDS domain, plus `extra` flags.
-  void StartFusiond(const std::string& config, std::vector<std::string> extra = {}) {
-    const std::string path = dir_ + "/fusiond.pbtxt";
-    std::ofstream(path) << config;
-    StartFusiondWithFile(path, std::move(extra));
-  }
-  void StartFusiondWithFile(const std::string& path, std::vector<std::string> extra = {}) {
-    std::vector<std::string> argv = {kBuild + "/service/fusiond", "--config", path, "--listen",
-                                     "127.0.0.1:0", "--dds-domain", std::to_string(domain_)};
-    argv.insert(argv.end(), extra.begin(), extra.end());
-    fusiond_ = std::make_unique<Subprocess>(argv);
-    ASSERT_TRUE(fusiond_->started());
-    const auto port = fusiond_->WaitForOutput(R"(fusiond listening on 127\.0\.0\.1:(\d+))", 20s);
-    ASSERT_TRUE(port) << "no 'listening' line: " << fusiond_->output();
-    address_ = "127.0.0.1:" + *port;
-    stub_ = v1::FusionMap::NewStub(grpc::CreateChannel(address_, grpc::InsecureChannelCredentials()));
-  }
-
-  v1::SensorCounters Counters(const std::string& id) {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + 5s);
-    v1::ListSensorsResponse reply;
-    const auto status = stub_->ListSensors(&context, v1::ListSensorsRequest(), &reply);
-    EXPECT_TRUE(status.ok()) << status.error_message();
-    for (const auto& s : reply.sensors()) {
-      if (s.id() == id) return s.counters();
-    }
-    ADD_FAILURE() << "sensor " << id << " not listed";
-    return {};
-  }
-
-  v1::Stats Stats() {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + 5s);
-    v1::Stats stats;
-    EXPECT_TRUE(stub_->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
-    return stats;
-  }
-
-  // Waits until `frames` clouds of sensor `id` are integrated and rendered.
-  bool WaitIntegrated(const std::string& id, std::uint64_t frames, std::chrono::seconds timeout,
-                      std::chrono::milliseconds quiet = 500ms) {
-    const auto end = std::chrono::steady_clock::now() + timeout;
-    while (Counters(id).integrated() < frames) {
-      if (std::chrono::steady_clock::now() > end) return false;
-      std::this_thread::sleep_for(50ms);
-    }
-    // The worker renders pending changes every render_interval_ms (100 ms here): once no
-    // render happened for `quiet`, the last cloud is in the published map.
-    auto renders = Stats().renders();
-    for (;;) {
-      std::this_thread::sleep_for(quiet);
-      const auto now = Stats().renders();
-      if (now == renders || std::chrono::steady_clock::now() > end) break;
-      renders = now;
-    }
-    return true;
-  }
-
-  std::string dir_;
-  unsigned domain_ = 0;
-  std::unique_ptr<Subprocess> fusiond_;
-  std::unique_ptr<v1::FusionMap::Stub> stub_;
-  std::string address_;
-};
 
 // Runs fusionctl against `server`; returns its exit code and stdout.
 int Fusionctl(const std::string& server, std::vector<std::string> args, std::string* out) {
@@ -168,8 +69,8 @@ std::vector<Plane> ParsePlanes(const std::string& table) {
   for (std::string line; std::getline(in, line);) {
     std::smatch m;
     if (std::regex_search(line, m, row)) {
-      planes.push_back({std::stod(m[1]), std::stod(m[2]), std::stod(m[3]), std::stod(m[4]),
-                        std::stol(m[5])});
+      planes.push_back(
+          {std::stod(m[1]), std::stod(m[2]), std::stod(m[3]), std::stod(m[4]), std::stol(m[5])});
     }
   }
   return planes;
@@ -178,7 +79,7 @@ std::vector<Plane> ParsePlanes(const std::string& table) {
 class E2eComposeTopologyTest : public E2eService {};
 
 TEST_F(E2eComposeTopologyTest, SensorsFusiondAndClientMapTheBoard) {
-  const std::string config = kRepo + "/docker/fusiond.pbtxt";
+  const std::string config = fusion::testing::kRepoDir + "/docker/fusiond.pbtxt";
   ASSERT_TRUE(fs::exists(config)) << config << " (the compose deployment's configuration)";
   // The container's address, domain and volume would not do here: the flags override them.
   ASSERT_NO_FATAL_FAILURE(StartFusiondWithFile(config, {"--snapshot", dir_ + "/map.ot"}));
@@ -190,10 +91,10 @@ TEST_F(E2eComposeTopologyTest, SensorsFusiondAndClientMapTheBoard) {
 
   // Both sensors, as the compose services start them (no --frames: they run until stopped).
   const std::string domain = std::to_string(domain_);
-  Subprocess sr3000({kTools + "fusion-sim-sensor", "--preset", "sr3000", "--rate", "5",
-                     "--domain", domain, "--scene", "paper-board"});
-  Subprocess stoc({kTools + "fusion-sim-sensor", "--preset", "stoc", "--rate", "5", "--domain",
-                   domain, "--scene", "paper-board"});
+  Subprocess sr3000({fusion::testing::kToolsDir + "fusion-sim-sensor", "--preset", "sr3000",
+                     "--rate", "5", "--domain", domain, "--scene", "paper-board"});
+  Subprocess stoc({fusion::testing::kToolsDir + "fusion-sim-sensor", "--preset", "stoc", "--rate",
+                   "5", "--domain", domain, "--scene", "paper-board"});
   ASSERT_TRUE(sr3000.started());
   ASSERT_TRUE(stoc.started());
 

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -20,130 +21,33 @@
 #include <thread>
 #include <vector>
 
-#include "../support/subprocess.h"
+#include "../support/e2e_service.h"
 #include "fusion/v1/map_service.grpc.pb.h"
 
 namespace {
 
+using fusion::testing::E2eService;
+using fusion::testing::RunTool;
 using fusion::testing::Subprocess;
 using namespace std::chrono_literals;
 namespace v1 = fusion::v1;
 namespace fs = std::filesystem;
 
-const std::string kBuild = FUSION_BINARY_DIR;
-const std::string kTools = kBuild + "/clients/";
 const std::string kPython = "/usr/bin/python3";
-// The repository root: FUSION_SHARED_DATA_DIR is "<repo>/../shared/data".
-const std::string kRepo = [] {
-  const std::string dir = FUSION_SHARED_DATA_DIR;
-  return dir.substr(0, dir.size() - std::string("/../shared/data").size());
-}();
-
-// Runs a tool to completion; returns its exit code (-1: did not finish) and stdout.
-int RunTool(std::vector<std::string> argv, std::string* out = nullptr,
-            std::chrono::seconds timeout = 60s) {
-  argv[0] = kTools + argv[0];
-  Subprocess process(argv);
-  if (!process.started()) return -1;
-  process.WaitForOutput("(?!)", timeout);  // drains stdout until the child exits
-  const int code = process.Wait(5000ms);
-  if (out) *out = process.output();
-  return code;
-}
-
-// A fusiond process with its own temporary folder and DDS domain, and gRPC stubs to it.
-class E2eService : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = ::testing::TempDir() + "e2e_" + std::to_string(getpid()) + "_" +
-           ::testing::UnitTest::GetInstance()->current_test_info()->name();
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    domain_ = fusion::testing::PrivateDomainId();
-  }
-  void TearDown() override {
-    if (!dir_.empty()) fs::remove_all(dir_);
-  }
-
-  // Starts fusiond with `config` (written to the temporary folder) on 127.0.0.1:0 in the
-  // test's DDS domain, plus `extra` flags.
-  void StartFusiond(const std::string& config, std::vector<std::string> extra = {}) {
-    const std::string path = dir_ + "/fusiond.pbtxt";
-    std::ofstream(path) << config;
-    StartFusiondWithFile(path, std::move(extra));
-  }
-  void StartFusiondWithFile(const std::string& path, std::vector<std::string> extra = {}) {
-    std::vector<std::string> argv = {kBuild + "/service/fusiond", "--config", path, "--listen",
-                                     "127.0.0.1:0", "--dds-domain", std::to_string(domain_)};
-    argv.insert(argv.end(), extra.begin(), extra.end());
-    fusiond_ = std::make_unique<Subprocess>(argv);
-    ASSERT_TRUE(fusiond_->started());
-    const auto port = fusiond_->WaitForOutput(R"(fusiond listening on 127\.0\.0\.1:(\d+))", 20s);
-    ASSERT_TRUE(port) << "no 'listening' line: " << fusiond_->output();
-    address_ = "127.0.0.1:" + *port;
-    stub_ = v1::FusionMap::NewStub(grpc::CreateChannel(address_, grpc::InsecureChannelCredentials()));
-  }
-
-  v1::SensorCounters Counters(const std::string& id) {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + 5s);
-    v1::ListSensorsResponse reply;
-    const auto status = stub_->ListSensors(&context, v1::ListSensorsRequest(), &reply);
-    EXPECT_TRUE(status.ok()) << status.error_message();
-    for (const auto& s : reply.sensors()) {
-      if (s.id() == id) return s.counters();
-    }
-    ADD_FAILURE() << "sensor " << id << " not listed";
-    return {};
-  }
-
-  v1::Stats Stats() {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + 5s);
-    v1::Stats stats;
-    EXPECT_TRUE(stub_->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
-    return stats;
-  }
-
-  // Waits until `frames` clouds of sensor `id` are integrated and rendered.
-  bool WaitIntegrated(const std::string& id, std::uint64_t frames, std::chrono::seconds timeout,
-                      std::chrono::milliseconds quiet = 500ms) {
-    const auto end = std::chrono::steady_clock::now() + timeout;
-    while (Counters(id).integrated() < frames) {
-      if (std::chrono::steady_clock::now() > end) return false;
-      std::this_thread::sleep_for(50ms);
-    }
-    // The worker renders pending changes every render_interval_ms (100 ms here): once no
-    // render happened for `quiet`, the last cloud is in the published map.
-    auto renders = Stats().renders();
-    for (;;) {
-      std::this_thread::sleep_for(quiet);
-      const auto now = Stats().renders();
-      if (now == renders || std::chrono::steady_clock::now() > end) break;
-      renders = now;
-    }
-    return true;
-  }
-
-  std::string dir_;
-  unsigned domain_ = 0;
-  std::unique_ptr<Subprocess> fusiond_;
-  std::unique_ptr<v1::FusionMap::Stub> stub_;
-  std::string address_;
-};
 
 // Runs path_check.py; returns its exit code and stdout + stderr.
 int PathCheck(const std::string& server, const std::string& from, const std::string& to,
               std::string* out) {
   const std::string log = ::testing::TempDir() + "path_check_" + std::to_string(getpid()) + ".log";
-  Subprocess process(
-      {"/bin/sh", "-c",
-       "exec " + kPython + " " + kRepo + "/clients/python/path_check.py --server " + server +
-           " --from " + from + " --to " + to + " --timeout 3 2>&1"},
-      {"PYTHONPATH=" + kBuild + "/clients/python"});
+  Subprocess process({"/bin/sh", "-c",
+                      "exec " + kPython + " " + fusion::testing::kRepoDir +
+                          "/clients/python/path_check.py --server " + server + " --from " + from +
+                          " --to " + to + " --timeout 3 2>&1"},
+                     {"PYTHONPATH=" + fusion::testing::kBuildDir + "/clients/python"});
   process.WaitForOutput("(?!)", 30s);
   const int code = process.Wait(5000ms);
   *out = process.output();
+  std::printf("path_check %s -> %s: exit %d: %s", from.c_str(), to.c_str(), code, out->c_str());
   return code;
 }
 
@@ -154,8 +58,9 @@ class E2ePythonClientTest : public E2eService {
     if (std::system((kPython + " -c 'import grpc, google.protobuf' 2>/dev/null").c_str()) != 0) {
       GTEST_SKIP() << kPython << " lacks grpc (apt-get install python3-grpcio python3-protobuf)";
     }
-    if (!fs::exists(kBuild + "/clients/python/fusion/v1/map_service_pb2_grpc.py")) {
-      GTEST_SKIP() << "no Python stubs in " << kBuild
+    if (!fs::exists(fusion::testing::kBuildDir +
+                    "/clients/python/fusion/v1/map_service_pb2_grpc.py")) {
+      GTEST_SKIP() << "no Python stubs in " << fusion::testing::kBuildDir
                    << "/clients/python (target fusion_python_stubs needs grpc_python_plugin)";
     }
     E2eService::SetUp();
@@ -175,8 +80,7 @@ TEST_F(E2ePythonClientTest, PathCheckFindsTheBoard) {
             0)
       << out;
   EXPECT_NE(out.find("published 10 frames"), std::string::npos) << out;
-  ASSERT_TRUE(WaitIntegrated("sr3000", 10, 30s))
-      << "integrated " << Counters("sr3000").integrated() << " of 10";
+  ASSERT_TRUE(WaitInMap(10, 30s)) << "integrated " << Counters("sr3000").integrated() << " of 10";
 
   // In front of the board: clear.
   EXPECT_EQ(PathCheck(address_, "0.5,0,0", "1.2,0,0", &out), 0) << out;

@@ -9,9 +9,9 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
-#include <csignal>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -23,153 +23,26 @@
 #include <thread>
 #include <vector>
 
-#include "../support/subprocess.h"
+#include "../support/e2e_service.h"
 #include "fusion/v1/map_service.grpc.pb.h"
 #include "fusion/v1/recording.pb.h"
 
 namespace {
 
+using fusion::testing::E2eService;
+using fusion::testing::Pose;
+using fusion::testing::ReadRecording;
+using fusion::testing::RunTool;
 using fusion::testing::Subprocess;
+using fusion::testing::WorldPoints;
 using namespace std::chrono_literals;
 namespace v1 = fusion::v1;
 namespace fs = std::filesystem;
 
-const std::string kBuild = FUSION_BINARY_DIR;
-const std::string kTools = kBuild + "/clients/";
 const std::string kData = std::string(FUSION_SHARED_DATA_DIR) + "/tum_fr2_pioneer_slam2";
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kStride = 4;  // 640 x 480 -> 160 x 120
 constexpr int kFrames = 10;
-
-// Runs a tool to completion; returns its exit code (-1: did not finish) and stdout.
-int RunTool(std::vector<std::string> argv, std::string* out = nullptr,
-            std::chrono::seconds timeout = 60s) {
-  argv[0] = kTools + argv[0];
-  Subprocess process(argv);
-  if (!process.started()) return -1;
-  process.WaitForOutput("(?!)", timeout);  // drains stdout until the child exits
-  const int code = process.Wait(5000ms);
-  if (out) *out = process.output();
-  return code;
-}
-
-// The clouds of a .frec file (docs/recording-format.md), read frame by frame.
-std::vector<v1::RecordedCloud> ReadRecording(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::vector<v1::RecordedCloud> clouds;
-  for (;;) {
-    std::uint32_t head[2];
-    if (!in.read(reinterpret_cast<char*>(head), sizeof head)) break;
-    std::string payload(head[0], '\0');
-    if (!in.read(payload.data(), head[0])) break;
-    v1::RecordingFrame frame;
-    if (!frame.ParseFromString(payload)) break;
-    if (frame.has_cloud()) clouds.push_back(frame.cloud());
-    if (frame.has_index()) break;
-  }
-  return clouds;
-}
-
-Eigen::Isometry3d Pose(const v1::RecordedPose& p) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = Eigen::Quaterniond(p.qw(), p.qx(), p.qy(), p.qz()).normalized().toRotationMatrix();
-  T.translation() = Eigen::Vector3d(p.tx(), p.ty(), p.tz());
-  return T;
-}
-
-// The finite points of a cloud in the world frame.
-std::vector<Eigen::Vector3d> WorldPoints(const v1::RecordedCloud& cloud) {
-  std::vector<float> xyz(cloud.xyz_f32le().size() / sizeof(float));
-  std::memcpy(xyz.data(), cloud.xyz_f32le().data(), xyz.size() * sizeof(float));
-  const Eigen::Isometry3d T = Pose(cloud.t_world_sensor());
-  std::vector<Eigen::Vector3d> points;
-  for (std::size_t i = 0; i + 2 < xyz.size(); i += 3) {
-    const Eigen::Vector3d p(xyz[i], xyz[i + 1], xyz[i + 2]);
-    if (p.allFinite()) points.push_back(T * p);
-  }
-  return points;
-}
-
-// A fusiond process with its own temporary folder and DDS domain, and gRPC stubs to it.
-class E2eService : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = ::testing::TempDir() + "e2e_" + std::to_string(getpid()) + "_" +
-           ::testing::UnitTest::GetInstance()->current_test_info()->name();
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    domain_ = fusion::testing::PrivateDomainId();
-  }
-  void TearDown() override {
-    if (!dir_.empty()) fs::remove_all(dir_);
-  }
-
-  // Starts fusiond with `config` (written to the temporary folder) on 127.0.0.1:0 in the
-  // test's DDS domain, plus `extra` flags.
-  void StartFusiond(const std::string& config, std::vector<std::string> extra = {}) {
-    const std::string path = dir_ + "/fusiond.pbtxt";
-    std::ofstream(path) << config;
-    StartFusiondWithFile(path, std::move(extra));
-  }
-  void StartFusiondWithFile(const std::string& path, std::vector<std::string> extra = {}) {
-    std::vector<std::string> argv = {kBuild + "/service/fusiond", "--config", path, "--listen",
-                                     "127.0.0.1:0", "--dds-domain", std::to_string(domain_)};
-    argv.insert(argv.end(), extra.begin(), extra.end());
-    fusiond_ = std::make_unique<Subprocess>(argv);
-    ASSERT_TRUE(fusiond_->started());
-    const auto port = fusiond_->WaitForOutput(R"(fusiond listening on 127\.0\.0\.1:(\d+))", 20s);
-    ASSERT_TRUE(port) << "no 'listening' line: " << fusiond_->output();
-    address_ = "127.0.0.1:" + *port;
-    stub_ = v1::FusionMap::NewStub(grpc::CreateChannel(address_, grpc::InsecureChannelCredentials()));
-  }
-
-  v1::SensorCounters Counters(const std::string& id) {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + 5s);
-    v1::ListSensorsResponse reply;
-    const auto status = stub_->ListSensors(&context, v1::ListSensorsRequest(), &reply);
-    EXPECT_TRUE(status.ok()) << status.error_message();
-    for (const auto& s : reply.sensors()) {
-      if (s.id() == id) return s.counters();
-    }
-    ADD_FAILURE() << "sensor " << id << " not listed";
-    return {};
-  }
-
-  v1::Stats Stats() {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + 5s);
-    v1::Stats stats;
-    EXPECT_TRUE(stub_->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
-    return stats;
-  }
-
-  // Waits until `frames` clouds of sensor `id` are integrated and rendered.
-  bool WaitIntegrated(const std::string& id, std::uint64_t frames, std::chrono::seconds timeout,
-                      std::chrono::milliseconds quiet = 500ms) {
-    const auto end = std::chrono::steady_clock::now() + timeout;
-    while (Counters(id).integrated() < frames) {
-      if (std::chrono::steady_clock::now() > end) return false;
-      std::this_thread::sleep_for(50ms);
-    }
-    // The worker renders pending changes every render_interval_ms (100 ms here): once no
-    // render happened for `quiet`, the last cloud is in the published map.
-    auto renders = Stats().renders();
-    for (;;) {
-      std::this_thread::sleep_for(quiet);
-      const auto now = Stats().renders();
-      if (now == renders || std::chrono::steady_clock::now() > end) break;
-      renders = now;
-    }
-    return true;
-  }
-
-  std::string dir_;
-  unsigned domain_ = 0;
-  std::unique_ptr<Subprocess> fusiond_;
-  std::unique_ptr<v1::FusionMap::Stub> stub_;
-  std::string address_;
-};
 
 class E2eTumTest : public E2eService {
  protected:
@@ -185,7 +58,8 @@ class E2eTumTest : public E2eService {
 TEST_F(E2eTumTest, FloorOfTheHallIsFoundAtItsHeight) {
   const auto t0 = std::chrono::steady_clock::now();
   const auto mark = [&](const char* what) {
-    std::printf("%6.2f s %s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), what);
+    std::printf("%6.2f s %s\n",
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), what);
   };
   // 1. Import every 4th pixel of the 10 frames.
   const std::string recording = dir_ + "/tum.frec";
@@ -247,13 +121,13 @@ TEST_F(E2eTumTest, FloorOfTheHallIsFoundAtItsHeight) {
   const double s2 = 0.0019, s1 = -2.0 * 0.0019 * 0.4, s0 = 0.0012 + 0.0019 * 0.16;
   std::ostringstream config;
   config << "log_level: \"warn\"\n"
-         << "sensors { id: \"kinect\" model: \"paper3d\" r_min_m: 0.5 r_max_m: 7.0\n"
+         << "sensors { id: \"kinect\" model: \"paper3d\" r_min_m: 0.5 r_max_m: 6.0\n"
          << "  fov_h_deg: " << fov_h << " fov_v_deg: " << fov_v << "\n"
          << "  cols: " << 640 / kStride << " rows: " << 480 / kStride << " epsilon: 0.02\n"
          << "  q_mu { a2: 0 a1: 1 a0: 0 }\n"
          << "  q_sigma { a2: " << s2 << " a1: " << s1 << " a0: " << s0 << " }\n"
          << "  queue_depth: 20 }\n"
-         << "map { resolution_m: 0.05 render_interval_ms: 100 beam_cell_size_m: 0.01 }\n"
+         << "map { resolution_m: 0.05 render_interval_ms: 100 beam_cell_size_m: 0.02 }\n"
          << "ingest { reliability: \"reliable\" }\n";
   mark("imported");
   ASSERT_NO_FATAL_FAILURE(StartFusiond(config.str()));
@@ -267,7 +141,7 @@ TEST_F(E2eTumTest, FloorOfTheHallIsFoundAtItsHeight) {
       << out;
   EXPECT_NE(out.find("published 10 clouds"), std::string::npos) << out;
   mark("replayed");
-  ASSERT_TRUE(WaitIntegrated("kinect", kFrames, 30s))
+  ASSERT_TRUE(WaitInMap(kFrames, 30s))
       << "integrated " << Counters("kinect").integrated() << " of " << kFrames;
   const auto counters = Counters("kinect");
   EXPECT_EQ(counters.received(), static_cast<std::uint64_t>(kFrames));
@@ -307,8 +181,7 @@ TEST_F(E2eTumTest, FloorOfTheHallIsFoundAtItsHeight) {
   // Where the floor points are, at the data's height (Hough bins: 2 degrees, 5 cm).
   EXPECT_NEAR(height_at(*floor, centroid.x(), centroid.y()), centroid.z(), 0.05) << listing;
   // Under the camera: world z ~ 0.
-  EXPECT_NEAR(height_at(*floor, cam.tx(), cam.ty()), floor_at(cam.tx(), cam.ty()), 0.08)
-      << listing;
+  EXPECT_NEAR(height_at(*floor, cam.tx(), cam.ty()), floor_at(cam.tx(), cam.ty()), 0.08) << listing;
   const Eigen::Vector3d n(floor->normal().x(), floor->normal().y(), floor->normal().z());
   EXPECT_LT(std::acos(std::abs(n.dot(floor_normal))) * 180.0 / kPi, 3.0) << listing;
   EXPECT_GT(floor->support_voxels(), 1000u) << listing;

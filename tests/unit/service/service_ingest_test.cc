@@ -1,10 +1,12 @@
 // Sample validation, the bounded per-sensor queues and the snapshot hub's change log.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <set>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "fusion/service/conversions.h"
@@ -167,6 +169,40 @@ TEST(ServiceIngestTest, QueuesKeepTheNewestAndCountDrops) {
   const auto start = std::chrono::steady_clock::now();
   EXPECT_FALSE(queues.PopAll(&out, start + std::chrono::milliseconds(30)));
   EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(25));
+}
+
+TEST(ServiceIngestTest, ReliableQueuesWaitForRoomAndLoseNothing) {
+  IngestQueues queues({{"a", 2}});
+  std::atomic<bool> stop{false};
+  std::atomic<std::uint64_t> pushed{0};
+  std::thread producer([&] {
+    for (std::uint64_t seq = 1; seq <= 50; ++seq) {
+      EXPECT_TRUE(queues.PushWait(MakeCloud("a", seq), stop));
+      EXPECT_LE(queues.Pending(), 2u);
+      pushed = seq;
+    }
+  });
+  std::vector<std::uint64_t> taken;
+  std::vector<Cloud> out;
+  while (taken.size() < 50) {
+    out.clear();
+    queues.PopAll(&out, std::chrono::steady_clock::now() + std::chrono::milliseconds(200));
+    for (const auto& cloud : out) taken.push_back(cloud.sequence_number);
+  }
+  producer.join();
+  for (std::uint64_t i = 0; i < taken.size(); ++i) EXPECT_EQ(taken[i], i + 1);
+  EXPECT_EQ(queues.counters("a")->received, 50u);
+  EXPECT_EQ(queues.counters("a")->dropped, 0u);
+
+  // A full queue and a stop: the waiting push gives up, counted as a drop.
+  ASSERT_TRUE(queues.PushWait(MakeCloud("a", 51), stop));
+  ASSERT_TRUE(queues.PushWait(MakeCloud("a", 52), stop));
+  std::thread blocked([&] { EXPECT_FALSE(queues.PushWait(MakeCloud("a", 53), stop)); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  stop = true;
+  blocked.join();
+  EXPECT_EQ(queues.counters("a")->dropped, 1u);
+  EXPECT_EQ(queues.Pending(), 2u);
 }
 
 std::shared_ptr<const MapSnapshot> Version(std::uint64_t v) {

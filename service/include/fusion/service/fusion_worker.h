@@ -63,6 +63,8 @@ class FusionWorker {
 
   [[nodiscard]] std::uint64_t renders() const { return renders_.load(); }
   [[nodiscard]] std::uint64_t integrated() const { return integrated_.load(); }
+  // Clouds integrated into the published map version (counted after it is published).
+  [[nodiscard]] std::uint64_t in_map() const { return in_map_.load(); }
 
  private:
   void Loop();
@@ -92,6 +94,7 @@ class FusionWorker {
   std::thread thread_;
   std::atomic<std::uint64_t> renders_{0};
   std::atomic<std::uint64_t> integrated_{0};
+  std::atomic<std::uint64_t> in_map_{0};
 };
 
 }  // namespace fusion::service

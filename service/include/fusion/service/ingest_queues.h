@@ -1,5 +1,7 @@
 // Bounded per-sensor queues between the DDS ingest thread and the fusion worker, with the
-// ingest counters every layer updates. Newest wins: a full queue drops its oldest cloud.
+// ingest counters every layer updates. Newest wins: a full queue drops its oldest cloud
+// (sensor data, best effort). With reliable ingest, PushWait waits for room instead, so a
+// reliable stream (a replayed recording) loses nothing and DDS flow control slows its writer.
 #pragma once
 
 #include <array>
@@ -56,6 +58,9 @@ class IngestQueues {
 
   // Queues a validated cloud of a known sensor; drops the oldest if the queue is full.
   void Push(Cloud cloud);
+  // Queues a validated cloud, waiting while its sensor's queue is full. Returns false (the
+  // cloud is not queued, and counted as dropped) if `stop` becomes true while waiting.
+  bool PushWait(Cloud cloud, const std::atomic<bool>& stop);
   // Moves every queued cloud into *out (oldest first per sensor). Waits until there is one,
   // Wake() is called or `until` passes. Returns true if *out is non-empty.
   bool PopAll(std::vector<Cloud>* out, std::chrono::steady_clock::time_point until);
@@ -71,7 +76,8 @@ class IngestQueues {
   std::map<std::string, std::unique_ptr<Slot>> slots_;  // fixed after construction
   RejectCounters all_rejected_;
   mutable std::mutex mutex_;
-  std::condition_variable cv_;
+  std::condition_variable cv_;        // clouds queued (or Wake)
+  std::condition_variable space_cv_;  // clouds taken
   bool woken_ = false;
 };
 
