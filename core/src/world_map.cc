@@ -215,13 +215,16 @@ void WorldMap::RenderState(SensorState& s, FuseStats* stats) {
   LocalGrid old = std::move(s.live);
   s.live = std::move(rendered);
   std::size_t changed = 0;
-  // Every key of the old or the new contribution may change; keys in both are
-  // visited once.
+  // Only keys whose opinion from this sensor changed (appeared, went away or took
+  // another value) can change the fused value: the committed history and the
+  // other sensors' opinions are what they were.
   old.ForEachLogOdds([&](const octomap::OcTreeKey& key, float) {
     if (!s.live.LogOddsOf(key)) changed += Refuse(key) ? 1 : 0;
   });
-  s.live.ForEachLogOdds(
-      [&](const octomap::OcTreeKey& key, float) { changed += Refuse(key) ? 1 : 0; });
+  s.live.ForEachLogOdds([&](const octomap::OcTreeKey& key, float l) {
+    const auto before = old.LogOddsOf(key);
+    if (!before || static_cast<float>(*before) != l) changed += Refuse(key) ? 1 : 0;
+  });
   if (changed > 0) PublishVersion();
   s.dirty = false;
   ++s.counters.renders;
