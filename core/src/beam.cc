@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <utility>
 
@@ -59,6 +60,11 @@ std::vector<double> CellsFromFirstHit(const std::vector<double>& weights,
   }
   return p_m;
 }
+
+namespace {
+// Two doubles (SSE2 on x86-64, NEON on arm64) for the ROI update's inner loop.
+using V2 = double __attribute__((vector_size(16)));
+}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 // BeamContext
@@ -190,6 +196,7 @@ void UllBeam::Reset(const BeamContext& ctx) {
   }
   w_all_free_ = ctx.RhoPow(n);
   total_ = w_all_free_;
+  ec_first_ = ec_end_ = ec_pool_ = 0;
   for (const Composite& c : list_) total_ += CompositeSum(ctx, c);
   touched_ = false;
 }
@@ -274,27 +281,42 @@ void UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
   double delta = 0.0;
   const BeamContext::RoiFactors roi = ctx.Roi(outcome);
   if (roi.end > roi.begin) {
-    const Composite& c = list_[Explode(ctx, roi.begin, roi.end)];
-    double* v = pool_.data() + c.pool_begin + (roi.begin - c.first);
+    if (!(roi.begin >= ec_first_ && roi.end <= ec_end_)) {
+      const Composite& c = list_[Explode(ctx, roi.begin, roi.end)];
+      ec_first_ = c.first;
+      ec_end_ = c.first + c.count;
+      ec_pool_ = c.pool_begin;
+    }
+    double* v = pool_.data() + ec_pool_ + (roi.begin - ec_first_);
     const std::size_t len = roi.end - roi.begin;
     if (roi.factors != nullptr) {
-      // delta = sum_t v_t (f_t - 1), four independent sums to break the add chain.
+      // delta = sum_t v_t (f_t - 1), four independent sums (two 2-lane vectors) to break the
+      // add chain; the pool and the factor table never overlap.
       const double* f = roi.factors;
-      double d[4] = {0.0, 0.0, 0.0, 0.0};
+      V2 d01 = {0.0, 0.0};
+      V2 d23 = {0.0, 0.0};
+      const V2 one = {1.0, 1.0};
       std::size_t t = 0;
       for (; t + 4 <= len; t += 4) {
-        for (std::size_t u = 0; u < 4; ++u) {
-          const double old = v[t + u];
-          v[t + u] = old * f[t + u];
-          d[u] += old * (f[t + u] - 1.0);
-        }
+        V2 a, b, fa, fb;
+        std::memcpy(&a, v + t, sizeof a);
+        std::memcpy(&b, v + t + 2, sizeof b);
+        std::memcpy(&fa, f + t, sizeof fa);
+        std::memcpy(&fb, f + t + 2, sizeof fb);
+        d01 += a * (fa - one);
+        d23 += b * (fb - one);
+        a *= fa;
+        b *= fb;
+        std::memcpy(v + t, &a, sizeof a);
+        std::memcpy(v + t + 2, &b, sizeof b);
       }
+      double tail = 0.0;
       for (; t < len; ++t) {
         const double old = v[t];
         v[t] = old * f[t];
-        d[0] += old * (f[t] - 1.0);
+        tail += old * (f[t] - 1.0);
       }
-      delta = (d[0] + d[1]) + (d[2] + d[3]);
+      delta = ((d01[0] + tail) + d01[1]) + (d23[0] + d23[1]);
     } else {
       for (std::size_t t = 0; t < len; ++t) {
         const double old = v[t];

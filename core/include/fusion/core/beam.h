@@ -153,6 +153,11 @@ class UllBeam {
   double w_all_free_ = 0.0;  // B_{N+1}
   double total_ = 1.0;
   bool touched_ = false;
+  // The EC of the last update ([ec_first_, ec_end_) at pool offset ec_pool_; ec_end_ = 0: none):
+  // a steady-state update whose ROI lies inside it needs neither the list nor a search.
+  std::uint32_t ec_first_ = 0;
+  std::uint32_t ec_end_ = 0;
+  std::uint32_t ec_pool_ = 0;
 };
 
 // All beams of one grid in one representation.
