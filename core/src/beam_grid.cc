@@ -216,29 +216,31 @@ void BeamGrid::IntervalOccupancy(std::size_t beam, const std::vector<double>& bo
   if (boundaries_m.size() < 2) return;
   const std::size_t n = cells_per_beam();
   const double cell = impl_->options.cell_size_m;
-  std::vector<std::uint32_t> cells(boundaries_m.size());
+  // cells[0] = 0 (the whole beam's mass), then one cell per boundary; one TailMasses walk
+  // answers both. Scratch per thread: renders call this from several threads.
+  thread_local std::vector<std::uint32_t> cells;
+  thread_local std::vector<double> tails;
+  cells.resize(boundaries_m.size() + 1);
+  cells[0] = 0;
   std::uint32_t previous = 0;
   for (std::size_t j = 0; j < boundaries_m.size(); ++j) {
     double c = std::round(boundaries_m[j] / cell);
     if (!(c >= 0.0)) c = 0.0;  // NaN and negatives
     c = std::min(c, static_cast<double>(n));
     const std::uint32_t ci = std::max(previous, static_cast<std::uint32_t>(c));  // ascending
-    cells[j] = ci;
+    cells[j + 1] = ci;
     previous = ci;
   }
-  std::vector<double> tail;
-  impl_->store->TailMasses(beam, cells, &tail);
-  std::vector<std::uint32_t> origin{0};
-  std::vector<double> total;
-  impl_->store->TailMasses(beam, origin, &total);
-  const double threshold = kNoInformationTail * total[0];
+  impl_->store->TailMasses(beam, cells, &tails);
+  const double threshold = kNoInformationTail * tails[0];
+  const double* tail = tails.data() + 1;
   out->resize(boundaries_m.size() - 1);
   for (std::size_t j = 0; j + 1 < boundaries_m.size(); ++j) {
     if (tail[j] > threshold) {
       // Telescoping Eq. 8: prod_{i in [a, b)} (1 - p(m_i)) = S_b / S_a.
       (*out)[j] = std::clamp(1.0 - tail[j + 1] / tail[j], 0.0, 1.0);
     } else {
-      (*out)[j] = PriorOccupancy(static_cast<double>(cells[j + 1] - cells[j]) * cell);
+      (*out)[j] = PriorOccupancy(static_cast<double>(cells[j + 2] - cells[j + 1]) * cell);
     }
   }
 }

@@ -2,13 +2,17 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <limits>
+#include <stdexcept>
+#include <thread>
 
 namespace fusion {
 namespace {
 
 constexpr int kTreeMaxVal = 32768;  // octomap tree_max_val for depth 16
 constexpr std::size_t kChunkSegments = 96;
+constexpr std::size_t kRowsPerBlock = 4;
 constexpr double kProbabilityFloor = 1e-9;
 
 double Logit(double p) {
@@ -228,6 +232,37 @@ void LocalGrid::AddEvidence(const octomap::OcTreeKey& key, double log_odds_evide
   }
 }
 
+void LocalGrid::Merge(const LocalGrid& other) {
+  if (other.combine_ != combine_ || other.resolution_m_ != resolution_m_) {
+    throw std::invalid_argument("LocalGrid::Merge: grids differ in resolution or rule");
+  }
+  for (const Entry& o : other.entries_) {
+    if (o.packed == kEmpty) continue;
+    if (2 * (size_ + 1) > entries_.size()) Grow();
+    std::size_t i = HashPacked(o.packed) & mask_;
+    while (entries_[i].packed != o.packed && entries_[i].packed != kEmpty) i = (i + 1) & mask_;
+    Entry& e = entries_[i];
+    if (e.packed == kEmpty) {
+      e = o;
+      ++size_;
+      continue;
+    }
+    switch (combine_) {
+      case VoxelCombine::kWeightedMeanLogOdds:
+        e.a += o.a;
+        e.b += o.b;
+        break;
+      case VoxelCombine::kMaxLogOdds:
+        e.a = std::max(e.a, o.a);
+        break;
+      case VoxelCombine::kIndependentPool:
+        e.a += o.a;
+        break;
+    }
+  }
+  last_ = 0;
+}
+
 const LocalGrid::Entry* LocalGrid::Find(std::uint64_t packed) const {
   std::size_t i = HashPacked(packed) & mask_;
   while (entries_[i].packed != kEmpty) {
@@ -267,10 +302,12 @@ std::vector<std::pair<octomap::OcTreeKey, float>> LocalGrid::LogOddsVoxels() con
   return out;
 }
 
-LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-                         const RenderOptions& options, RenderStats* stats) {
-  LocalGrid local(options.resolution_m, options.combine);
-  RenderStats s;
+namespace {
+
+// Renders the beams of `rows` (row-major beam order) into `local`.
+void RenderRows(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                const RenderOptions& options, const std::vector<std::size_t>& rows,
+                LocalGrid& local, RenderStats& s) {
   const SensorSpec& spec = grid.spec();
   const BeamTessellation& tess = grid.tessellation();
   const double beam_length_m =
@@ -284,47 +321,91 @@ LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_
   RayTracer tracer(grid, options);
   std::vector<Segment> segments;
   segments.reserve(512);
-  const std::size_t beam_count = tess.beam_count();
-  for (std::size_t b = 0; b < beam_count; ++b) {
-    if (!grid.Touched(b)) {
-      ++s.beams_untouched;
-      continue;
-    }
-    ++s.beams_rendered;
-    segments.clear();
-    const Eigen::Vector3d dir_sensor = tess.Direction(b);
-    const double t_stop = tracer.Trace(b, origin, R * dir_sensor, t_start, t_end, 1.0f, &segments);
-    ++s.rays_traced;
-    const int k = std::clamp(static_cast<int>(std::ceil(width_rad * t_stop / options.resolution_m)),
-                             1, std::max(1, options.max_subrays_per_axis));
-    if (k > 1) {
-      // The beam's footprint outgrows a voxel at r_split = resolution / width:
-      // keep the centre ray up to there and spread k x k sub-rays uniformly
-      // over its azimuth x elevation sector beyond, each with weight 1 / k^2.
-      const double r_split = options.resolution_m / width_rad;
-      double t_sub = t_start;
-      std::size_t keep = 0;
-      while (keep < segments.size() && segments[keep].t_out_m <= r_split) {
-        t_sub = segments[keep].t_out_m;
-        ++keep;
+  const auto cols = static_cast<std::size_t>(tess.cols());
+  for (const std::size_t row : rows) {
+    for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
+      if (!grid.Touched(b)) {
+        ++s.beams_untouched;
+        continue;
       }
-      segments.resize(keep);
-      const double az = std::atan2(dir_sensor.x(), dir_sensor.z());
-      const double el = std::atan2(-dir_sensor.y(), std::hypot(dir_sensor.x(), dir_sensor.z()));
-      const float weight = 1.0f / static_cast<float>(k * k);
-      for (int i = 0; i < k; ++i) {
-        const double sub_az = az + ((i + 0.5) / k - 0.5) * tess.beam_width_h_rad();
-        for (int j = 0; j < k; ++j) {
-          const double sub_el = el + ((j + 0.5) / k - 0.5) * tess.beam_width_v_rad();
-          const Eigen::Vector3d d(std::cos(sub_el) * std::sin(sub_az), -std::sin(sub_el),
-                                  std::cos(sub_el) * std::cos(sub_az));
-          tracer.Trace(b, origin, R * d, t_sub, t_end, weight, &segments);
-          ++s.rays_traced;
+      ++s.beams_rendered;
+      segments.clear();
+      const Eigen::Vector3d dir_sensor = tess.Direction(b);
+      const double t_stop =
+          tracer.Trace(b, origin, R * dir_sensor, t_start, t_end, 1.0f, &segments);
+      ++s.rays_traced;
+      const int k =
+          std::clamp(static_cast<int>(std::ceil(width_rad * t_stop / options.resolution_m)), 1,
+                     std::max(1, options.max_subrays_per_axis));
+      if (k > 1) {
+        // The beam's footprint outgrows a voxel at r_split = resolution / width:
+        // keep the centre ray up to there and spread k x k sub-rays uniformly
+        // over its azimuth x elevation sector beyond, each with weight 1 / k^2.
+        const double r_split = options.resolution_m / width_rad;
+        double t_sub = t_start;
+        std::size_t keep = 0;
+        while (keep < segments.size() && segments[keep].t_out_m <= r_split) {
+          t_sub = segments[keep].t_out_m;
+          ++keep;
+        }
+        segments.resize(keep);
+        const double az = std::atan2(dir_sensor.x(), dir_sensor.z());
+        const double el = std::atan2(-dir_sensor.y(), std::hypot(dir_sensor.x(), dir_sensor.z()));
+        const float weight = 1.0f / static_cast<float>(k * k);
+        for (int i = 0; i < k; ++i) {
+          const double sub_az = az + ((i + 0.5) / k - 0.5) * tess.beam_width_h_rad();
+          for (int j = 0; j < k; ++j) {
+            const double sub_el = el + ((j + 0.5) / k - 0.5) * tess.beam_width_v_rad();
+            const Eigen::Vector3d d(std::cos(sub_el) * std::sin(sub_az), -std::sin(sub_el),
+                                    std::cos(sub_el) * std::cos(sub_az));
+            tracer.Trace(b, origin, R * d, t_sub, t_end, weight, &segments);
+            ++s.rays_traced;
+          }
         }
       }
+      s.segments += segments.size();
+      for (const Segment& seg : segments) local.AddEvidence(seg.key, seg.evidence, seg.weight);
     }
-    s.segments += segments.size();
-    for (const Segment& seg : segments) local.AddEvidence(seg.key, seg.evidence, seg.weight);
+  }
+}
+
+}  // namespace
+
+LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                         const RenderOptions& options, RenderStats* stats) {
+  const auto rows = static_cast<std::size_t>(grid.tessellation().rows());
+  std::size_t threads =
+      options.threads != 0 ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  threads = std::clamp<std::size_t>(threads, 1, std::max<std::size_t>(1, rows / kRowsPerBlock));
+  // Blocks of rows dealt out in turn, so that every thread gets its share of the beams that
+  // see far (long rays) and of those that hit something near.
+  std::vector<std::vector<std::size_t>> rows_of(threads);
+  for (std::size_t r = 0; r < rows; ++r) rows_of[(r / kRowsPerBlock) % threads].push_back(r);
+  std::vector<LocalGrid> parts(threads, LocalGrid(options.resolution_m, options.combine));
+  std::vector<RenderStats> part_stats(threads);
+  std::vector<std::exception_ptr> errors(threads);
+  const auto work = [&](std::size_t t) {
+    try {
+      RenderRows(grid, T_world_sensor, options, rows_of[t], parts[t], part_stats[t]);
+    } catch (...) {
+      errors[t] = std::current_exception();
+    }
+  };
+  std::vector<std::thread> helpers;
+  for (std::size_t t = 1; t < threads; ++t) helpers.emplace_back(work, t);
+  work(0);
+  for (std::thread& h : helpers) h.join();
+  for (const auto& e : errors) {
+    if (e) std::rethrow_exception(e);
+  }
+  LocalGrid local = std::move(parts[0]);
+  RenderStats s = part_stats[0];
+  for (std::size_t t = 1; t < threads; ++t) {
+    local.Merge(parts[t]);
+    s.beams_rendered += part_stats[t].beams_rendered;
+    s.beams_untouched += part_stats[t].beams_untouched;
+    s.rays_traced += part_stats[t].rays_traced;
+    s.segments += part_stats[t].segments;
   }
   s.voxels = local.size();
   if (stats != nullptr) *stats = s;

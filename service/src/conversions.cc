@@ -149,6 +149,12 @@ std::optional<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapCo
     return std::nullopt;
   }
   if (c.max_range_m() > 0.0) options.render.max_range_m = c.max_range_m();
+  if (c.render_threads() > 256) {
+    *error = "render_threads: " + std::to_string(c.render_threads()) +
+             " is outside 0..256 (0: one per hardware thread)";
+    return std::nullopt;
+  }
+  options.render.threads = c.render_threads();
   return options;
 }
 

@@ -56,7 +56,7 @@ void BM_IntegrateSr3000Frame(benchmark::State& state) {
 }
 BENCHMARK(BM_IntegrateSr3000Frame)->Unit(benchmark::kMillisecond);
 
-// Rendering a 30-frame SR-3000 beam grid into a 2 cm local grid.
+// Rendering a 30-frame SR-3000 beam grid into a 2 cm local grid, on 1 or 2 threads.
 void BM_RenderSr3000(benchmark::State& state) {
   const Fixture& f = SharedFixture();
   fusion::BeamGrid grid(f.sr.spec, GridOptions());
@@ -64,6 +64,7 @@ void BM_RenderSr3000(benchmark::State& state) {
     grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
   fusion::RenderOptions options;
   options.resolution_m = kResolutionM;
+  options.threads = static_cast<unsigned>(state.range(0));
   fusion::RenderStats stats;
   for (auto _ : state) {
     auto local = fusion::RenderBeamGrid(grid, f.sr.T_world_sensor, options, &stats);
@@ -72,7 +73,7 @@ void BM_RenderSr3000(benchmark::State& state) {
   state.counters["voxels"] = static_cast<double>(stats.voxels);
   state.counters["segments"] = static_cast<double>(stats.segments);
 }
-BENCHMARK(BM_RenderSr3000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_RenderSr3000)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Rendering and fusing a 30-frame SR-3000 period into a 2 cm world map
 // (re-render of the same period: replaces the sensor's live contribution).

@@ -179,5 +179,53 @@ TEST(LocalGrid, WideBeamCoversItsSector) {
   EXPECT_GT(*p, 0.9);
 }
 
+// Threads split the beams and merge their grids: the same voxels with the same values (max:
+// exactly; mean and pool: up to float rounding of the sums), and the same counts.
+TEST(LocalGrid, ThreadsRenderTheSameGrid) {
+  SensorSpec spec = PencilSpec();
+  spec.fov_h_rad = 0.6;
+  spec.fov_v_rad = 0.5;
+  spec.cols = 24;
+  spec.rows = 21;
+  BeamGrid grid(spec, GridOptions());
+  for (int i = 0; i < 4; ++i) {
+    for (std::size_t b = 0; b < grid.beam_count(); ++b) {
+      if (b % 7 == 3) continue;  // untouched beams
+      const Reading reading = b % 5 == 0 ? Reading{Reading::Kind::kBeyondRange, 0.0}
+                                         : Reading{Reading::Kind::kRange, 0.8 + 0.002 * (b % 50)};
+      grid.Update(b, reading);
+    }
+  }
+  const Eigen::Isometry3d T_world_sensor =
+      Eigen::Translation3d(0.1, -0.2, 0.3) * Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitY());
+  for (const VoxelCombine combine : {VoxelCombine::kMaxLogOdds, VoxelCombine::kWeightedMeanLogOdds,
+                                     VoxelCombine::kIndependentPool}) {
+    RenderOptions options;
+    options.combine = combine;
+    RenderStats one_stats;
+    const LocalGrid one = RenderBeamGrid(grid, T_world_sensor, options, &one_stats);
+    for (const unsigned threads : {2u, 3u}) {
+      options.threads = threads;
+      RenderStats many_stats;
+      const LocalGrid many = RenderBeamGrid(grid, T_world_sensor, options, &many_stats);
+      ASSERT_GT(one.size(), 1000u);
+      ASSERT_EQ(many.size(), one.size());
+      EXPECT_EQ(many_stats.beams_rendered, one_stats.beams_rendered);
+      EXPECT_EQ(many_stats.beams_untouched, one_stats.beams_untouched);
+      EXPECT_EQ(many_stats.rays_traced, one_stats.rays_traced);
+      EXPECT_EQ(many_stats.segments, one_stats.segments);
+      one.ForEachLogOdds([&](const octomap::OcTreeKey& key, float l) {
+        const auto m = many.LogOddsOf(key);
+        ASSERT_TRUE(m.has_value());
+        if (combine == VoxelCombine::kMaxLogOdds) {
+          EXPECT_EQ(static_cast<float>(*m), l);
+        } else {
+          EXPECT_NEAR(*m, l, 1e-4 * (1.0 + std::abs(l)));
+        }
+      });
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fusion

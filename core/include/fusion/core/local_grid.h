@@ -55,6 +55,9 @@ struct RenderOptions {
   double max_range_m = 1e9;
   // Each segment's evidence is clamped to +-this (natural log-odds).
   double max_abs_log_odds = kDefaultMaxAbsLogOdds;
+  // Threads that trace beams (each into its own grid, merged at the end; the result is the
+  // same up to float rounding of the mean / pool sums). 0: one per hardware thread.
+  unsigned threads = 1;
 };
 
 struct RenderStats {
@@ -97,6 +100,9 @@ class LocalGrid {
       if (e.packed != kEmpty) f(Unpack(e.packed), CombinedLogOdds(e));
     }
   }
+  // Folds another grid of the same resolution and rule into this one, as if its segments had
+  // been added here.
+  void Merge(const LocalGrid& other);
   void Clear();
   [[nodiscard]] std::size_t MemoryBytes() const { return entries_.capacity() * sizeof(Entry); }
 
