@@ -40,8 +40,9 @@ fusion::WorldMapOptions MapOptions() {
 }
 
 fusion::BeamGridOptions GridOptions() {
+  // The beam grid WorldMap would give the sensor (its prior included).
   fusion::BeamGridOptions options = MapOptions().beam_grid;
-  options.prior_reference_length_m = kResolutionM;
+  options.prior_reference_length_m = MapOptions().beam_prior_length_m;
   return options;
 }
 
@@ -85,10 +86,13 @@ void BM_RenderAndFuseSr3000(benchmark::State& state) {
     (void)map.Integrate("sr", f.sr.T_world_sensor, cloud.xyz.data(), cloud.size(),
                         cloud.beyond_range);
   }
+  fusion::FuseStats stats;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(map.Render("sr"));
+    benchmark::DoNotOptimize(map.Render("sr", &stats));
   }
   state.counters["map_leaves"] = static_cast<double>(map.tree().getNumLeafNodes());
+  state.counters["rays"] = static_cast<double>(stats.render.rays_traced);
+  state.counters["segments"] = static_cast<double>(stats.render.segments);
 }
 BENCHMARK(BM_RenderAndFuseSr3000)->Unit(benchmark::kMillisecond);
 
@@ -151,14 +155,18 @@ void BM_MovingPerFrameOurs(benchmark::State& state) {
   fusion::WorldMap map(MapOptions());
   (void)map.AddSensor("sr", f.sr.spec);
   std::size_t i = 0;
+  fusion::FuseStats stats;
   for (auto _ : state) {
     const auto& cloud = f.frames[i % f.frames.size()];
     Eigen::Isometry3d T = f.sr.T_world_sensor;
     T.translation().y() += 0.05 * static_cast<double>(i % 2);  // beyond the 1 cm tolerance
     ++i;
     (void)map.Integrate("sr", T, cloud.xyz.data(), cloud.size(), cloud.beyond_range);
-    (void)map.Render("sr");
+    (void)map.Render("sr", &stats);
   }
+  state.counters["rays"] = static_cast<double>(stats.render.rays_traced);
+  state.counters["segments"] = static_cast<double>(stats.render.segments);
+  state.counters["voxels"] = static_cast<double>(stats.render.voxels);
 }
 BENCHMARK(BM_MovingPerFrameOurs)->Unit(benchmark::kMillisecond);
 

@@ -37,7 +37,7 @@ enum class VoxelCombine {
 };
 
 struct RenderOptions {
-  static constexpr double kDefaultTailMass = 1e-4;
+  static constexpr double kDefaultTailMass = 1e-2;
   static constexpr int kDefaultMaxSubraysPerAxis = 3;
   static constexpr double kDefaultMaxAbsLogOdds = 12.0;
 
