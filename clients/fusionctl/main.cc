@@ -183,7 +183,7 @@ int Sensors(Context& ctx, const Args&) {
   for (const auto& s : reply.sensors()) {
     const auto& c = s.counters();
     std::printf("%-12s %-8s %9u %13llu %10llu %10llu %9llu %9llu %10llu\n", s.id().c_str(),
-                s.preset().c_str(), s.beams(), (unsigned long long)s.memory_bytes(),
+                s.preset().empty() ? "-" : s.preset().c_str(), s.beams(), (unsigned long long)s.memory_bytes(),
                 (unsigned long long)c.received(), (unsigned long long)c.integrated(),
                 (unsigned long long)c.dropped(), (unsigned long long)c.rejected(),
                 (unsigned long long)c.last_sequence_number());
