@@ -1,8 +1,13 @@
 #include "fusion/service/fusion_worker.h"
 
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 
 namespace fusion::service {
 
@@ -46,6 +51,13 @@ void FusionWorker::RebuildMapLocked() {
 }
 
 void FusionWorker::Loop() {
+  // Queries come first: the worker (and the render threads it starts, which inherit this) runs
+  // at a lower priority than the gRPC and DDS threads, so a render never holds a query back
+  // for a whole time slice on a busy machine. Linux keeps a nice value per thread.
+  if (options_.nice > 0 &&
+      setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), options_.nice) != 0) {
+    spdlog::warn("worker: could not lower its priority: {}", std::strerror(errno));
+  }
   using Clock = std::chrono::steady_clock;
   auto last_render = Clock::now();
   std::vector<Cloud> clouds;

@@ -8,7 +8,8 @@
 //   4. samples dropped with sr3000 at 30 Hz and stoc (160 x 120) at 15 Hz
 // Usage: service_bench [--seconds S] [--trials N] [--log-level LEVEL]
 //   --seconds: duration of scenarios 3 and 4 (default 10); --trials: scenario 1 (default 20);
-//   --log-level: fusiond's (default warn; debug prints render times on stderr).
+//   --log-level: fusiond's (default warn; debug logs render times, written to
+//   /tmp/service_bench_fusiond.log).
 #include <grpcpp/grpcpp.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -289,7 +290,9 @@ int main(int argc, char** argv) {
   std::ofstream(config) << "sensors { id: \"sr3000\" preset: \"sr3000\" }\n"
                         << "sensors { id: \"stoc\" preset: \"stoc\" cols: 160 rows: 120 }\n";
   const unsigned domain = 100 + static_cast<unsigned>(getpid()) % 100;
-  fusion::testing::Subprocess fusiond({kFusiond, "--config", config, "--listen", "127.0.0.1:0",
+  // fusiond logs on stderr: through a shell that joins it to stdout, which Subprocess reads.
+  fusion::testing::Subprocess fusiond({"/bin/sh", "-c", "exec \"$0\" \"$@\" 2>&1", kFusiond,
+                                       "--config", config, "--listen", "127.0.0.1:0",
                                        "--dds-domain", std::to_string(domain), "--log-level",
                                        log_level});
   const auto port = fusiond.WaitForOutput(R"(listening on 127\.0\.0\.1:(\d+))", 20s);

@@ -26,6 +26,8 @@ struct WorkerOptions {
   WorldMapOptions map;
   StateThresholds thresholds;
   std::chrono::milliseconds render_interval{200};
+  // Nice value of the worker thread and its render threads (0: as the process).
+  int nice = 10;
 };
 
 // One beam of a sensor's beam grid, for inspection.
