@@ -66,9 +66,12 @@ void FusionWorker::Loop() {
     queues_->PopAll(&clouds, until);
     std::lock_guard<std::mutex> lock(map_mutex_);
     for (const Cloud& cloud : clouds) IntegrateLocked(cloud);
-    if (dirty_ && (Clock::now() - last_render >= options_.render_interval || stop_)) {
+    const auto now = Clock::now();
+    if (dirty_ && (now - last_render >= options_.render_interval || stop_)) {
+      // The cadence counts from the start of a render: a render that takes most of the
+      // interval is followed by the next one as soon as the interval is over.
+      last_render = now;
       RenderAndPublishLocked();
-      last_render = Clock::now();
     }
   };
   while (!stop_) {

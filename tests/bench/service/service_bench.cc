@@ -6,7 +6,7 @@
 //   3. small-query latency (QueryPoints of 1 and 10 points, CastRay) while sr3000 and stoc
 //      stream at 30 Hz each
 //   4. samples dropped with sr3000 at 30 Hz and stoc (160 x 120) at 15 Hz
-// Usage: service_bench [--seconds S] [--trials N] [--log-level LEVEL]
+// Usage: service_bench [--seconds S] [--trials N] [--log-level LEVEL] [--max-range M]
 //   --seconds: duration of scenarios 3 and 4 (default 10); --trials: scenario 1 (default 20);
 //   --log-level: fusiond's (default warn; debug logs render times, written to
 //   /tmp/service_bench_fusiond.log).
@@ -131,8 +131,8 @@ class Publisher {
     fusion_dds_PointCloud sample{};
     sample.sensor_id = const_cast<char*>(id.c_str());
     sample.sequence_number = seq;
-    sample.T_world_sensor = {T.translation().x(), T.translation().y(), T.translation().z(),
-                             q.x(), q.y(), q.z(), q.w()};
+    sample.T_world_sensor = {
+        T.translation().x(), T.translation().y(), T.translation().z(), q.x(), q.y(), q.z(), q.w()};
     sample.width = static_cast<std::uint32_t>(frame.cols);
     sample.height = static_cast<std::uint32_t>(frame.rows);
     sample.xyz._buffer = const_cast<float*>(frame.xyz.data());
@@ -160,7 +160,8 @@ struct StreamStats {
 StreamStats Stream(dds_entity_t writer, const SensorStream& s, double hz, std::uint64_t* seq,
                    const std::atomic<bool>& stop) {
   StreamStats stats;
-  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / hz));
+  const auto period =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / hz));
   auto next = Clock::now();
   for (std::size_t i = 0; !stop; ++i) {
     const auto t0 = Clock::now();
@@ -224,25 +225,26 @@ void PrintCounterTable(const std::vector<std::pair<std::string, double>>& rates,
                        const std::map<std::string, StreamStats>& published,
                        const std::map<std::string, v1::SensorCounters>& before,
                        const std::map<std::string, v1::SensorCounters>& after) {
-  std::printf("| sensor | rate | published | received | DDS lost (published-received) | "
-              "dropped (queue) | rejected | integrated | not integrated (published-integrated) "
-              "|\n|---|---|---|---|---|---|---|---|---|\n");
+  std::printf(
+      "| sensor | rate | published | received | DDS lost (published-received) | "
+      "dropped (queue) | rejected | integrated | not integrated (published-integrated) "
+      "|\n|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& [id, hz] : rates) {
     const auto& pub = published.at(id);
     const CounterDelta d = Delta(before.at(id), after.at(id));
-    std::printf("| %s | %.0f Hz | %llu | %llu | %lld | %llu | %llu | %llu | %lld |\n", id.c_str(),
-                hz, static_cast<unsigned long long>(pub.written),
-                static_cast<unsigned long long>(d.received),
-                static_cast<long long>(pub.written) - static_cast<long long>(d.received),
-                static_cast<unsigned long long>(d.dropped),
-                static_cast<unsigned long long>(d.rejected),
-                static_cast<unsigned long long>(d.integrated),
-                static_cast<long long>(pub.written) - static_cast<long long>(d.integrated));
+    std::printf(
+        "| %s | %.0f Hz | %llu | %llu | %lld | %llu | %llu | %llu | %lld |\n", id.c_str(), hz,
+        static_cast<unsigned long long>(pub.written), static_cast<unsigned long long>(d.received),
+        static_cast<long long>(pub.written) - static_cast<long long>(d.received),
+        static_cast<unsigned long long>(d.dropped), static_cast<unsigned long long>(d.rejected),
+        static_cast<unsigned long long>(d.integrated),
+        static_cast<long long>(pub.written) - static_cast<long long>(d.integrated));
     if (pub.write_failures > 0 || pub.late_ticks > 0) {
-      std::printf("|   (%s publisher: %llu dds_write failures, %llu late ticks, max write %.1f "
-                  "ms) |||||||||\n",
-                  id.c_str(), static_cast<unsigned long long>(pub.write_failures),
-                  static_cast<unsigned long long>(pub.late_ticks), pub.max_write_ms);
+      std::printf(
+          "|   (%s publisher: %llu dds_write failures, %llu late ticks, max write %.1f "
+          "ms) |||||||||\n",
+          id.c_str(), static_cast<unsigned long long>(pub.write_failures),
+          static_cast<unsigned long long>(pub.late_ticks), pub.max_write_ms);
     }
   }
 }
@@ -253,20 +255,27 @@ int main(int argc, char** argv) {
   double seconds = 10;
   int trials = 20;
   std::string log_level = "warn";
+  double max_range_m = 0.0;  // map.max_range_m; 0: the default (each sensor's full range)
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string flag = argv[i];
-    if (flag == "--seconds") seconds = std::atof(argv[i + 1]);
-    else if (flag == "--trials") trials = std::atoi(argv[i + 1]);
-    else if (flag == "--log-level") log_level = argv[i + 1];
+    if (flag == "--seconds")
+      seconds = std::atof(argv[i + 1]);
+    else if (flag == "--max-range")
+      max_range_m = std::atof(argv[i + 1]);
+    else if (flag == "--trials")
+      trials = std::atoi(argv[i + 1]);
+    else if (flag == "--log-level")
+      log_level = argv[i + 1];
     else {
       std::fprintf(stderr, "unknown flag %s\n", flag.c_str());
       return 2;
     }
   }
   const auto bench_start = Clock::now();
-  std::printf("# fusiond service benchmark\n\nload average at start (/proc/loadavg): %s; "
-              "hardware threads: %u\n\n",
-              LoadAverage().c_str(), std::thread::hardware_concurrency());
+  std::printf(
+      "# fusiond service benchmark\n\nload average at start (/proc/loadavg): %s; "
+      "hardware threads: %u\n\n",
+      LoadAverage().c_str(), std::thread::hardware_concurrency());
 
   // Frames: the paper's two sensors looking at the board.
   sim::PaperRunOptions run_options;
@@ -275,7 +284,8 @@ int main(int argc, char** argv) {
   const auto runs = sim::PaperSensorRuns(run_options);
   const sim::Scene scene = sim::PaperBoardScene();
   std::map<std::string, SensorStream> streams;
-  for (const auto& run : runs) streams[run.id] = {run.id, run.T_world_sensor, sim::SimulateRun(scene, run)};
+  for (const auto& run : runs)
+    streams[run.id] = {run.id, run.T_world_sensor, sim::SimulateRun(scene, run)};
   const SensorStream& sr = streams.at("sr3000");
   const SensorStream& stoc = streams.at("stoc");
   std::printf("frames: sr3000 %d x %d (%zu bytes of xyz), stoc %d x %d (%zu bytes of xyz)\n\n",
@@ -289,20 +299,22 @@ int main(int argc, char** argv) {
   const std::string config = std::string(dir) + "/fusiond.pbtxt";
   std::ofstream(config) << "sensors { id: \"sr3000\" preset: \"sr3000\" }\n"
                         << "sensors { id: \"stoc\" preset: \"stoc\" cols: 160 rows: 120 }\n";
+  if (max_range_m > 0.0)
+    std::ofstream(config, std::ios::app) << "map { max_range_m: " << max_range_m << " }\n";
   const unsigned domain = 100 + static_cast<unsigned>(getpid()) % 100;
   // fusiond logs on stderr: through a shell that joins it to stdout, which Subprocess reads.
-  fusion::testing::Subprocess fusiond({"/bin/sh", "-c", "exec \"$0\" \"$@\" 2>&1", kFusiond,
-                                       "--config", config, "--listen", "127.0.0.1:0",
-                                       "--dds-domain", std::to_string(domain), "--log-level",
-                                       log_level});
+  fusion::testing::Subprocess fusiond(
+      {"/bin/sh", "-c", "exec \"$0\" \"$@\" 2>&1", kFusiond, "--config", config, "--listen",
+       "127.0.0.1:0", "--dds-domain", std::to_string(domain), "--log-level", log_level});
   const auto port = fusiond.WaitForOutput(R"(listening on 127\.0\.0\.1:(\d+))", 20s);
   if (!port) {
     std::fprintf(stderr, "fusiond did not start: %s\n", fusiond.output().c_str());
     return 1;
   }
-  std::printf("fusiond: %s --config %s --listen 127.0.0.1:0 --dds-domain %u --log-level %s "
-              "(port %s)\n\n",
-              kFusiond.c_str(), config.c_str(), domain, log_level.c_str(), port->c_str());
+  std::printf(
+      "fusiond: %s --config %s --listen 127.0.0.1:0 --dds-domain %u --log-level %s "
+      "(port %s)\n\n",
+      kFusiond.c_str(), config.c_str(), domain, log_level.c_str(), port->c_str());
   Client client("127.0.0.1:" + *port);
   // fusiond logs to its stdout (spdlog's default logger): keep draining the pipe so verbose
   // levels cannot block it, and keep the text for the end.
@@ -359,10 +371,12 @@ int main(int argc, char** argv) {
                 *std::min_element(v.begin(), v.end()));
   };
   {
-    std::printf("## 1. DDS-to-queryable latency, one SR-3000 frame (176 x 144), "
-                "render_interval_ms 200 (default)\n\n");
-    std::printf("| case | trials | median ms | p90 ms | max ms | min ms |\n"
-                "|---|---|---|---|---|---|\n");
+    std::printf(
+        "## 1. DDS-to-queryable latency, one SR-3000 frame (176 x 144), "
+        "render_interval_ms 200 (default)\n\n");
+    std::printf(
+        "| case | trials | median ms | p90 ms | max ms | min ms |\n"
+        "|---|---|---|---|---|---|\n");
     int timeouts = 0;
     // 1a. First frame after ResetMap (every voxel of the frustum is new), worker idle.
     std::vector<double> after_reset;
@@ -370,7 +384,10 @@ int main(int argc, char** argv) {
       const std::uint64_t reset_version = client.Reset();
       std::this_thread::sleep_for(250ms);
       const double ms = frame_to_queryable(reset_version, true, sr.frames[t % sr.frames.size()]);
-      if (ms < 0) ++timeouts; else after_reset.push_back(ms);
+      if (ms < 0)
+        ++timeouts;
+      else
+        after_reset.push_back(ms);
     }
     latency_row("first frame after ResetMap (worker idle)", after_reset);
     // Map the board with both sensors (steady state for the rest of the benchmark).
@@ -420,16 +437,18 @@ int main(int argc, char** argv) {
 
   // ---- 2. Batched QueryPoints throughput -----------------------------------------------
   {
-    std::printf("## 2. QueryPoints throughput (one client, end to end incl. client-side "
-                "protobuf; random points in the box [0.3,2.2] x [-1,1] x [-0.45,0.75] m)\n\n");
+    std::printf(
+        "## 2. QueryPoints throughput (one client, end to end incl. client-side "
+        "protobuf; random points in the box [0.3,2.2] x [-1,1] x [-0.45,0.75] m)\n\n");
     std::mt19937 rng(5);
     std::uniform_real_distribution<double> ux(0.3, 2.2), uy(-1.0, 1.0), uz(-0.45, 0.75);
     v1::QueryPointsRequest big;
     for (int i = 0; i < 100000; ++i) *big.add_points() = P({ux(rng), uy(rng), uz(rng)});
-    std::printf("| batch (points) | clients | calls | ms per call (median) | points/s |\n"
-                "|---|---|---|---|---|\n");
-    for (const auto& [batch, clients] : std::vector<std::pair<int, int>>{
-             {10000, 1}, {50000, 1}, {100000, 1}, {100000, 2}}) {
+    std::printf(
+        "| batch (points) | clients | calls | ms per call (median) | points/s |\n"
+        "|---|---|---|---|---|\n");
+    for (const auto& [batch, clients] :
+         std::vector<std::pair<int, int>>{{10000, 1}, {50000, 1}, {100000, 1}, {100000, 2}}) {
       v1::QueryPointsRequest request;
       request.mutable_points()->CopyFrom(big.points());
       request.mutable_points()->DeleteSubrange(batch, big.points_size() - batch);
@@ -447,7 +466,8 @@ int main(int argc, char** argv) {
             const auto t0 = Clock::now();
             const auto status = client.stub().QueryPoints(&context, request, &reply);
             if (!status.ok() || reply.results_size() != batch) {
-              if (errors++ == 0) std::fprintf(stderr, "QueryPoints: %s\n", status.error_message().c_str());
+              if (errors++ == 0)
+                std::fprintf(stderr, "QueryPoints: %s\n", status.error_message().c_str());
               continue;
             }
             per_call[c].push_back(Ms(Clock::now() - t0));
@@ -469,9 +489,10 @@ int main(int argc, char** argv) {
   // ---- 3. Small-query latency while two sensors stream at 30 Hz -------------------------
   std::map<std::string, v1::SensorCounters> before, after;
   {
-    std::printf("## 3. Small-query latency while sr3000 (176 x 144) and stoc (160 x 120) "
-                "stream at 30 Hz each, %.0f s, one query every 2 ms (rotating kinds)\n\n",
-                seconds);
+    std::printf(
+        "## 3. Small-query latency while sr3000 (176 x 144) and stoc (160 x 120) "
+        "stream at 30 Hz each, %.0f s, one query every 2 ms (rotating kinds)\n\n",
+        seconds);
     // Board-area points: some occupied, some free, some unknown.
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> ux(0.3, 2.2), uy(-1.0, 1.0), uz(-0.45, 0.75);
@@ -508,7 +529,10 @@ int main(int argc, char** argv) {
           ray_hits += reply.hit() ? 1 : 0;
         }
         const double ms = Ms(Clock::now() - t0);
-        if (status.ok()) lat[i % 3].push_back(ms); else ++errors;
+        if (status.ok())
+          lat[i % 3].push_back(ms);
+        else
+          ++errors;
         next += 2ms;
         std::this_thread::sleep_until(next);
       }
@@ -519,13 +543,14 @@ int main(int argc, char** argv) {
                     Percentile(lat[k], 0.5), Percentile(lat[k], 0.99),
                     lat[k].empty() ? NAN : *std::max_element(lat[k].begin(), lat[k].end()));
       }
-      std::printf("| %s | all small queries | %zu | %.3f | %.3f | %.2f |\n", label,
-                  combined.size(), Percentile(combined, 0.5), Percentile(combined, 0.99),
+      std::printf("| %s | all small queries | %zu | %.3f | %.3f | %.2f |\n", label, combined.size(),
+                  Percentile(combined, 0.5), Percentile(combined, 0.99),
                   combined.empty() ? NAN : *std::max_element(combined.begin(), combined.end()));
       return std::pair{errors, ray_hits};
     };
-    std::printf("| sensors | query | samples | p50 ms | p99 ms | max ms |\n"
-                "|---|---|---|---|---|---|\n");
+    std::printf(
+        "| sensors | query | samples | p50 ms | p99 ms | max ms |\n"
+        "|---|---|---|---|---|---|\n");
     const auto [idle_errors, idle_hits] = run_queries(2.0, "none (baseline, 2 s)");
     client.Counters(&before);
     std::atomic<bool> stop{false};
@@ -537,9 +562,10 @@ int main(int argc, char** argv) {
     sr_thread.join();
     stoc_thread.join();
     const std::map<std::string, StreamStats> published{{"sr3000", sr_stats}, {"stoc", stoc_stats}};
-    std::printf("\nerrors: %d (baseline %d); CastRay hits: %d (baseline %d); target p99 <= 2 ms "
-                "while streaming\n\n",
-                errors, idle_errors, ray_hits, idle_hits);
+    std::printf(
+        "\nerrors: %d (baseline %d); CastRay hits: %d (baseline %d); target p99 <= 2 ms "
+        "while streaming\n\n",
+        errors, idle_errors, ray_hits, idle_hits);
     std::this_thread::sleep_for(1000ms);  // let the worker drain its queues
     client.Counters(&after);
     std::printf("counters during scenario 3:\n\n");
@@ -549,9 +575,10 @@ int main(int argc, char** argv) {
 
   // ---- 4. Samples dropped: sr3000 at 30 Hz + stoc at 15 Hz -----------------------------
   {
-    std::printf("## 4. Samples lost with sr3000 (176 x 144) at 30 Hz + stoc (160 x 120) at "
-                "15 Hz, %.0f s, no queries\n\n",
-                seconds);
+    std::printf(
+        "## 4. Samples lost with sr3000 (176 x 144) at 30 Hz + stoc (160 x 120) at "
+        "15 Hz, %.0f s, no queries\n\n",
+        seconds);
     v1::Stats stats_before, stats_after;
     client.Stats(&stats_before);
     client.Counters(&before);
@@ -586,7 +613,8 @@ int main(int argc, char** argv) {
     std::printf("fusiond warnings:\n%s\n", fusiond.output().c_str());
   }
   std::printf("fusiond exit code %d; load average at end: %s; total %.1f s\n", code,
-              LoadAverage().c_str(), std::chrono::duration<double>(Clock::now() - bench_start).count());
+              LoadAverage().c_str(),
+              std::chrono::duration<double>(Clock::now() - bench_start).count());
   std::filesystem::remove_all(dir);
   return 0;
 }
