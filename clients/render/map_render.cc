@@ -2,12 +2,11 @@
 
 #include <png.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
-
-#include <Eigen/Geometry>
 
 namespace fusion::render {
 namespace {
@@ -23,8 +22,10 @@ struct Voxel {
 // Perceptually ordered blue -> cyan -> green -> yellow -> red ramp over t in [0, 1].
 Eigen::Vector3d Ramp(double t) {
   t = std::clamp(t, 0.0, 1.0);
-  static const Eigen::Vector3d kStops[] = {{0.19, 0.25, 0.80}, {0.10, 0.70, 0.85},
-                                           {0.20, 0.75, 0.30}, {0.95, 0.85, 0.20},
+  static const Eigen::Vector3d kStops[] = {{0.19, 0.25, 0.80},
+                                           {0.10, 0.70, 0.85},
+                                           {0.20, 0.75, 0.30},
+                                           {0.95, 0.85, 0.20},
                                            {0.85, 0.20, 0.15}};
   const double x = t * 4.0;
   const int i = std::min(3, static_cast<int>(x));
@@ -69,7 +70,25 @@ Image RenderOccupied(const octomap::OcTree& tree, const RenderOptions& options) 
   if (right.norm() < 1e-6) right = Eigen::Vector3d::UnitX();
   right.normalize();
   const Eigen::Vector3d down = forward.cross(right);
-  const double focal_px = 0.5 * image.height / std::tan(half_fov);
+  // Zoom and centre on what is drawn: the voxels' extent in normalised image coordinates
+  // (x / z, y / z) fills 90 % of the picture's width or height, whichever binds first.
+  Eigen::AlignedBox2d extent;
+  for (const Voxel& v : voxels) {
+    const Eigen::Vector3d rel = v.centre - eye;
+    const double z = rel.dot(forward);
+    if (z <= 1e-3) continue;
+    const double half_size = 0.5 * v.size / z;
+    const Eigen::Vector2d uv(rel.dot(right) / z, rel.dot(down) / z);
+    extent.extend(uv - Eigen::Vector2d::Constant(half_size));
+    extent.extend(uv + Eigen::Vector2d::Constant(half_size));
+  }
+  double focal_px = 0.5 * image.height / std::tan(half_fov);
+  Eigen::Vector2d centre_px(0.5 * image.width, 0.5 * image.height);
+  if (!extent.isEmpty()) {
+    const Eigen::Vector2d size = extent.sizes().cwiseMax(1e-9);
+    focal_px = 0.9 * std::min(image.width / size.x(), image.height / size.y());
+    centre_px -= focal_px * extent.center();
+  }
 
   std::vector<float> depth(static_cast<std::size_t>(image.width) * image.height,
                            std::numeric_limits<float>::infinity());
@@ -81,13 +100,13 @@ Image RenderOccupied(const octomap::OcTree& tree, const RenderOptions& options) 
     const Eigen::Vector3d rel = v.centre - eye;
     const double z = rel.dot(forward);
     if (z <= 1e-3) continue;
-    const double u = image.width * 0.5 + focal_px * rel.dot(right) / z;
-    const double w = image.height * 0.5 + focal_px * rel.dot(down) / z;
+    const double u = centre_px.x() + focal_px * rel.dot(right) / z;
+    const double w = centre_px.y() + focal_px * rel.dot(down) / z;
     const int half = std::max(1, static_cast<int>(std::ceil(0.6 * focal_px * v.size / z)));
-    const double t = options.color_by == ColorBy::kHeight
-                         ? (v.centre.z() - z_min) / z_span
-                         : (v.probability - options.min_probability) /
-                               (1.0 - options.min_probability);
+    const double t =
+        options.color_by == ColorBy::kHeight
+            ? (v.centre.z() - z_min) / z_span
+            : (v.probability - options.min_probability) / (1.0 - options.min_probability);
     // Nearer voxels brighter: depth cue without lighting.
     const double shade = 1.0 - 0.45 * std::clamp((z - near) / (far - near), 0.0, 1.0);
     const Eigen::Vector3d colour = Ramp(t) * shade * 255.0;
@@ -100,8 +119,8 @@ Image RenderOccupied(const octomap::OcTree& tree, const RenderOptions& options) 
         if (z >= depth[i]) continue;
         depth[i] = static_cast<float>(z);
         // Darken the square's border so neighbouring voxels stay distinguishable.
-        const bool edge = std::abs(y - static_cast<int>(w)) == half ||
-                          std::abs(x - static_cast<int>(u)) == half;
+        const bool edge =
+            std::abs(y - static_cast<int>(w)) == half || std::abs(x - static_cast<int>(u)) == half;
         const double k = edge ? 0.75 : 1.0;
         image.rgb[3 * i] = static_cast<std::uint8_t>(colour.x() * k);
         image.rgb[3 * i + 1] = static_cast<std::uint8_t>(colour.y() * k);

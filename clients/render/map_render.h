@@ -3,11 +3,11 @@
 // Fig. 5), written as PNG.
 #pragma once
 
+#include <octomap/OcTree.h>
+
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <octomap/OcTree.h>
 
 namespace fusion::render {
 
@@ -20,6 +20,7 @@ struct RenderOptions {
   // azimuth (about world z, from +x towards +y) and elevation (above the xy plane).
   double view_azimuth_deg = -135.0;
   double view_elevation_deg = 30.0;
+  // Perspective of the camera; the picture is then zoomed so the drawn voxels fill 90 % of it.
   double fov_deg = 50.0;
   double min_probability = 0.5;  // voxels drawn: occupancy above this
   ColorBy color_by = ColorBy::kHeight;
