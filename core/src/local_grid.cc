@@ -199,37 +199,43 @@ void LocalGrid::Grow() {
   last_ = 0;
 }
 
-void LocalGrid::AddEvidence(const octomap::OcTreeKey& key, double log_odds_evidence,
-                            double weight) {
-  const std::uint64_t packed = Pack(key);
-  std::size_t i = last_;
-  if (entries_[i].packed != packed) {
-    if (2 * (size_ + 1) > entries_.size()) Grow();
-    i = HashPacked(packed) & mask_;
-    while (entries_[i].packed != packed && entries_[i].packed != kEmpty) i = (i + 1) & mask_;
-  }
-  last_ = i;
-  Entry& e = entries_[i];
-  const auto evidence = static_cast<float>(log_odds_evidence);
+std::size_t LocalGrid::SlotOf(std::uint64_t packed) {
+  if (2 * (size_ + 1) > entries_.size()) Grow();
+  std::size_t i = HashPacked(packed) & mask_;
+  while (entries_[i].packed != packed && entries_[i].packed != kEmpty) i = (i + 1) & mask_;
+  return i;
+}
+
+void LocalGrid::Fold(std::size_t slot, std::uint64_t packed, float a, float b) {
+  Entry& e = entries_[slot];
   const bool fresh = e.packed == kEmpty;
   if (fresh) {
     e.packed = packed;
     ++size_;
   }
   switch (combine_) {
-    case VoxelCombine::kWeightedMeanLogOdds: {
-      const auto w = static_cast<float>(weight);
-      e.a += w * evidence;
-      e.b += w;
+    case VoxelCombine::kWeightedMeanLogOdds:
+      e.a += a;
+      e.b += b;
       break;
-    }
     case VoxelCombine::kMaxLogOdds:
-      e.a = fresh ? evidence : std::max(e.a, evidence);
+      e.a = fresh ? a : std::max(e.a, a);
       break;
     case VoxelCombine::kIndependentPool:
-      e.a += evidence;
+      e.a += a;
       break;
   }
+}
+
+void LocalGrid::AddEvidence(const octomap::OcTreeKey& key, double log_odds_evidence,
+                            double weight) {
+  const std::uint64_t packed = Pack(key);
+  if (entries_[last_].packed != packed) last_ = SlotOf(packed);
+  const auto evidence = static_cast<float>(log_odds_evidence);
+  const auto w = static_cast<float>(weight);
+  // The entry's terms (see Entry): mean sums w * e and w; max and pool take e.
+  const bool mean = combine_ == VoxelCombine::kWeightedMeanLogOdds;
+  Fold(last_, packed, mean ? w * evidence : evidence, w);
 }
 
 void LocalGrid::Merge(const LocalGrid& other) {
@@ -237,28 +243,7 @@ void LocalGrid::Merge(const LocalGrid& other) {
     throw std::invalid_argument("LocalGrid::Merge: grids differ in resolution or rule");
   }
   for (const Entry& o : other.entries_) {
-    if (o.packed == kEmpty) continue;
-    if (2 * (size_ + 1) > entries_.size()) Grow();
-    std::size_t i = HashPacked(o.packed) & mask_;
-    while (entries_[i].packed != o.packed && entries_[i].packed != kEmpty) i = (i + 1) & mask_;
-    Entry& e = entries_[i];
-    if (e.packed == kEmpty) {
-      e = o;
-      ++size_;
-      continue;
-    }
-    switch (combine_) {
-      case VoxelCombine::kWeightedMeanLogOdds:
-        e.a += o.a;
-        e.b += o.b;
-        break;
-      case VoxelCombine::kMaxLogOdds:
-        e.a = std::max(e.a, o.a);
-        break;
-      case VoxelCombine::kIndependentPool:
-        e.a += o.a;
-        break;
-    }
+    if (o.packed != kEmpty) Fold(SlotOf(o.packed), o.packed, o.a, o.b);
   }
   last_ = 0;
 }

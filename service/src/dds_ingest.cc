@@ -128,11 +128,8 @@ void DdsIngest::Handle(const fusion_dds_PointCloud& sample) {
     LogRejection(*reason, sensor_id, detail);
     return;
   }
-  if (options_.reliable) {
-    (void)queues_->PushWait(CloudFromDds(sample), stop_);
-  } else {
-    queues_->Push(CloudFromDds(sample));
-  }
+  // Reliable ingest waits for room (lossless); sensor data replaces the oldest cloud.
+  (void)queues_->Push(CloudFromDds(sample), options_.reliable ? &stop_ : nullptr);
 }
 
 void DdsIngest::LogRejection(RejectReason reason, const std::string& sensor_id,

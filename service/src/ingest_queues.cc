@@ -41,24 +41,7 @@ void IngestQueues::CountRejected(const std::string& sensor_id, RejectReason reas
   if (auto* c = counters(sensor_id)) c->rejected.Count(reason);
 }
 
-void IngestQueues::Push(Cloud cloud) {
-  const auto it = slots_.find(cloud.sensor_id);
-  if (it == slots_.end()) return;  // callers validate first
-  Slot& slot = *it->second;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    slot.counters.received.fetch_add(1, std::memory_order_relaxed);
-    slot.counters.last_sequence_number.store(cloud.sequence_number, std::memory_order_relaxed);
-    while (slot.queue.size() >= slot.depth) {
-      slot.queue.pop_front();
-      slot.counters.dropped.fetch_add(1, std::memory_order_relaxed);
-    }
-    slot.queue.push_back(std::move(cloud));
-  }
-  cv_.notify_one();
-}
-
-bool IngestQueues::PushWait(Cloud cloud, const std::atomic<bool>& stop) {
+bool IngestQueues::Push(Cloud cloud, const std::atomic<bool>* stop) {
   const auto it = slots_.find(cloud.sensor_id);
   if (it == slots_.end()) return false;  // callers validate first
   Slot& slot = *it->second;
@@ -67,11 +50,15 @@ bool IngestQueues::PushWait(Cloud cloud, const std::atomic<bool>& stop) {
     slot.counters.received.fetch_add(1, std::memory_order_relaxed);
     slot.counters.last_sequence_number.store(cloud.sequence_number, std::memory_order_relaxed);
     while (slot.queue.size() >= slot.depth) {
-      if (stop.load()) {
+      if (stop == nullptr) {  // newest wins
+        slot.queue.pop_front();
+        slot.counters.dropped.fetch_add(1, std::memory_order_relaxed);
+      } else if (stop->load()) {  // shutting down: give up on this cloud
         slot.counters.dropped.fetch_add(1, std::memory_order_relaxed);
         return false;
+      } else {  // wait for the worker to take clouds
+        space_cv_.wait_for(lock, std::chrono::milliseconds(100));
       }
-      space_cv_.wait_for(lock, std::chrono::milliseconds(100));
     }
     slot.queue.push_back(std::move(cloud));
   }

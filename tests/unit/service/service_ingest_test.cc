@@ -177,7 +177,7 @@ TEST(ServiceIngestTest, ReliableQueuesWaitForRoomAndLoseNothing) {
   std::atomic<std::uint64_t> pushed{0};
   std::thread producer([&] {
     for (std::uint64_t seq = 1; seq <= 50; ++seq) {
-      EXPECT_TRUE(queues.PushWait(MakeCloud("a", seq), stop));
+      EXPECT_TRUE(queues.Push(MakeCloud("a", seq), &stop));
       EXPECT_LE(queues.Pending(), 2u);
       pushed = seq;
     }
@@ -195,9 +195,9 @@ TEST(ServiceIngestTest, ReliableQueuesWaitForRoomAndLoseNothing) {
   EXPECT_EQ(queues.counters("a")->dropped, 0u);
 
   // A full queue and a stop: the waiting push gives up, counted as a drop.
-  ASSERT_TRUE(queues.PushWait(MakeCloud("a", 51), stop));
-  ASSERT_TRUE(queues.PushWait(MakeCloud("a", 52), stop));
-  std::thread blocked([&] { EXPECT_FALSE(queues.PushWait(MakeCloud("a", 53), stop)); });
+  ASSERT_TRUE(queues.Push(MakeCloud("a", 51), &stop));
+  ASSERT_TRUE(queues.Push(MakeCloud("a", 52), &stop));
+  std::thread blocked([&] { EXPECT_FALSE(queues.Push(MakeCloud("a", 53), &stop)); });
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
   stop = true;
   blocked.join();

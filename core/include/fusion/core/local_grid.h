@@ -126,6 +126,11 @@ class LocalGrid {
                               static_cast<octomap::key_type>((packed >> 32) & 0xffff));
   }
   [[nodiscard]] float CombinedLogOdds(const Entry& e) const;
+  // Slot holding `packed`, or the empty slot where it goes (grows the table first if needed).
+  std::size_t SlotOf(std::uint64_t packed);
+  // Folds terms (a, b) into the entry at `slot` (claiming it for `packed` if empty) by the
+  // combination rule.
+  void Fold(std::size_t slot, std::uint64_t packed, float a, float b);
   [[nodiscard]] const Entry* Find(std::uint64_t packed) const;
   void Grow();
 

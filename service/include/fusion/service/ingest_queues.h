@@ -1,6 +1,6 @@
 // Bounded per-sensor queues between the DDS ingest thread and the fusion worker, with the
 // ingest counters every layer updates. Newest wins: a full queue drops its oldest cloud
-// (sensor data, best effort). With reliable ingest, PushWait waits for room instead, so a
+// (sensor data, best effort). With reliable ingest, Push waits for room instead, so a
 // reliable stream (a replayed recording) loses nothing and DDS flow control slows its writer.
 #pragma once
 
@@ -56,11 +56,10 @@ class IngestQueues {
   [[nodiscard]] const RejectCounters& all_rejected() const { return all_rejected_; }
   void CountRejected(const std::string& sensor_id, RejectReason reason);
 
-  // Queues a validated cloud of a known sensor; drops the oldest if the queue is full.
-  void Push(Cloud cloud);
-  // Queues a validated cloud, waiting while its sensor's queue is full. Returns false (the
-  // cloud is not queued, and counted as dropped) if `stop` becomes true while waiting.
-  bool PushWait(Cloud cloud, const std::atomic<bool>& stop);
+  // Queues a validated cloud of a known sensor. With `stop` null, a full queue drops its
+  // oldest cloud (counted). Otherwise Push waits while the queue is full; it returns false
+  // (the cloud not queued, counted as dropped) if *stop becomes true while it waits.
+  bool Push(Cloud cloud, const std::atomic<bool>* stop = nullptr);
   // Moves every queued cloud into *out (oldest first per sensor). Waits until there is one,
   // Wake() is called or `until` passes. Returns true if *out is non-empty.
   bool PopAll(std::vector<Cloud>* out, std::chrono::steady_clock::time_point until);
