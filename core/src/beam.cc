@@ -172,6 +172,22 @@ void DenseBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32
   }
 }
 
+std::uint32_t DenseBeam::TailDropCell(const BeamContext& ctx, std::uint32_t from,
+                                      double fraction) const {
+  const std::size_t n = ctx.cell_count();
+  const std::size_t start = std::min<std::size_t>(from, n);
+  double tail_from = 0.0;
+  for (std::size_t i = n + 1; i-- > start;) tail_from += p_[i];
+  const double threshold = fraction * tail_from;
+  double acc = p_[n];
+  if (acc >= threshold) return static_cast<std::uint32_t>(n + 1);
+  for (std::size_t i = n; i-- > start;) {
+    acc += p_[i];
+    if (acc >= threshold) return static_cast<std::uint32_t>(i + 1);
+  }
+  return static_cast<std::uint32_t>(start + 1);  // fraction >= 1
+}
+
 std::size_t DenseBeam::MemoryBytes() const {
   return sizeof(*this) + p_.capacity() * sizeof(double);
 }
@@ -360,6 +376,47 @@ void UllBeam::Weights(const BeamContext& ctx, std::vector<double>* weights) cons
   (*weights)[n] = w_all_free_;
 }
 
+std::uint32_t UllBeam::TailDropCell(const BeamContext& ctx, std::uint32_t from,
+                                    double fraction) const {
+  const std::size_t n = ctx.cell_count();
+  const auto none = static_cast<std::uint32_t>(n + 1);
+  const std::uint32_t start = std::min<std::uint32_t>(from, static_cast<std::uint32_t>(n));
+  thread_local std::vector<std::uint32_t> cells(1);
+  thread_local std::vector<double> tails;
+  cells.assign(1, start);
+  TailMasses(ctx, cells, &tails);
+  const double threshold = fraction * tails[0];
+  double acc = w_all_free_;  // S(N)
+  if (acc >= threshold) return none;
+  for (std::size_t k = list_.size(); k-- > 0;) {
+    const Composite& c = list_[k];
+    const std::size_t c_end = std::size_t{c.first} + c.count;
+    if (c.exploded == 0) {
+      const double sum = c.w_first * ctx.GeomSum(c.count);
+      if (acc + sum < threshold) {
+        acc += sum;
+        continue;
+      }
+      // S(x) = acc + w_first rho^(x - first) GeomSum(c_end - x) falls with x: the largest x
+      // with S(x) >= threshold, by bisection ([lo] holds, (hi] does not).
+      std::size_t lo = c.first, hi = c_end;
+      while (hi - lo > 1) {
+        const std::size_t mid = lo + (hi - lo) / 2;
+        const double s_mid = acc + c.w_first * ctx.RhoPow(mid - c.first) * ctx.GeomSum(c_end - mid);
+        (s_mid >= threshold ? lo : hi) = mid;
+      }
+      return static_cast<std::uint32_t>(std::max<std::size_t>(lo + 1, start + 1));
+    }
+    for (std::size_t t = c.count; t-- > 0;) {
+      acc += pool_[c.pool_begin + t];
+      if (acc >= threshold) {
+        return static_cast<std::uint32_t>(std::max<std::size_t>(c.first + t + 1, start + 1));
+      }
+    }
+  }
+  return static_cast<std::uint32_t>(start + 1);  // fraction >= 1
+}
+
 void UllBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
                          std::vector<double>* out) const {
   out->assign(cells.size(), 0.0);
@@ -473,6 +530,10 @@ class BeamStoreOf final : public BeamStore {
   void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
                   std::vector<double>* out) const override {
     beams_[beam].TailMasses(*ctx_, cells, out);
+  }
+  std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,
+                             double fraction) const override {
+    return beams_[beam].TailDropCell(*ctx_, from, fraction);
   }
   bool Touched(std::size_t beam) const override { return beams_[beam].touched(); }
   void Reset() override {

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -243,6 +244,19 @@ void BeamGrid::IntervalOccupancy(std::size_t beam, const std::vector<double>& bo
       (*out)[j] = PriorOccupancy(static_cast<double>(cells[j + 2] - cells[j + 1]) * cell);
     }
   }
+}
+
+double BeamGrid::InformationEndM(std::size_t beam, double from_m, double fraction) const {
+  impl_->CheckBeam(beam);
+  const std::size_t n = cells_per_beam();
+  const double cell = impl_->options.cell_size_m;
+  double from = std::round(from_m / cell);
+  if (!(from >= 0.0)) from = 0.0;
+  from = std::min(from, static_cast<double>(n));
+  const std::uint32_t c =
+      impl_->store->TailDropCell(beam, static_cast<std::uint32_t>(from), fraction);
+  if (c > n) return std::numeric_limits<double>::infinity();
+  return static_cast<double>(c) * cell;
 }
 
 double BeamGrid::PriorOccupancy(double length_m) const {

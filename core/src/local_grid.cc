@@ -11,7 +11,7 @@ namespace fusion {
 namespace {
 
 constexpr int kTreeMaxVal = 32768;  // octomap tree_max_val for depth 16
-constexpr std::size_t kChunkSegments = 96;
+constexpr std::size_t kChunkSegments = 256;
 constexpr std::size_t kRowsPerBlock = 4;
 constexpr double kProbabilityFloor = 1e-9;
 
@@ -33,6 +33,30 @@ std::uint64_t HashPacked(std::uint64_t packed) {
   x ^= x >> 33;
   return (x << 6) + local;
 }
+
+// Slots of a 4 x 4 x 4 brick (HashPacked).
+constexpr std::size_t kBrickSlots = 64;
+
+// The probe sequence of a key: the key's slot in the following blocks of kBrickSlots (a
+// brick's voxels keep their offsets, and neighbouring bricks do not pile up in one run as
+// with linear probing), and after a whole round of blocks the next offset, so that every slot
+// is reached.
+class Probe {
+ public:
+  Probe(std::uint64_t packed, std::size_t mask)
+      : slot_(HashPacked(packed) & mask), mask_(mask), round_mask_((mask + 1) / kBrickSlots - 1) {}
+  [[nodiscard]] std::size_t slot() const { return slot_; }
+  void Next() {
+    ++step_;
+    slot_ = (slot_ + kBrickSlots + ((step_ & round_mask_) == 0 ? 1 : 0)) & mask_;
+  }
+
+ private:
+  std::size_t slot_;
+  std::size_t mask_;
+  std::size_t round_mask_;
+  std::size_t step_ = 0;
+};
 
 // One voxel crossing of a ray with its evidence.
 struct Segment {
@@ -79,6 +103,12 @@ class RayTracer {
 
   double Trace(std::size_t beam, const Eigen::Vector3d& origin, const Eigen::Vector3d& dir,
                double t_start, double t_end, float weight_scale, std::vector<Segment>* out) {
+    // Voxels beyond the cell where the remaining first-hit mass falls below tail_mass are
+    // never reached: the loop below stops there. Tracing only that far saves the traversal and
+    // the interval lookups of a whole chunk behind every surface.
+    // (The voxel holding that cell is still crossed whole.)
+    const double t_last_entry =
+        std::min(t_end, grid_.InformationEndM(beam, t_start, options_.tail_mass) + cell_m_);
     if (!(t_end > t_start)) return t_start;
     const double res = options_.resolution_m;
     const Eigen::Vector3d p0 = origin + dir * t_start;
@@ -109,7 +139,7 @@ class RayTracer {
       boundaries_.clear();
       keys_.clear();
       boundaries_.push_back(t_in);
-      while (keys_.size() < kChunkSegments && t_in < t_end) {
+      while (keys_.size() < kChunkSegments && t_in < t_last_entry) {
         const int axis =
             (t_max[0] < t_max[1]) ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
         const double t_out = std::min(t_max[axis], t_end);
@@ -123,9 +153,10 @@ class RayTracer {
       }
       if (keys_.empty()) break;
       grid_.IntervalOccupancy(beam, boundaries_, &occupancy_);
+      long c1 = std::lround(boundaries_[0] / cell_m_);
       for (std::size_t j = 0; j < keys_.size(); ++j) {
-        const long c0 = std::lround(boundaries_[j] / cell_m_);
-        const long c1 = std::lround(boundaries_[j + 1] / cell_m_);
+        const long c0 = c1;
+        c1 = std::lround(boundaries_[j + 1] / cell_m_);
         if (c1 <= c0) continue;  // shorter than a beam cell: no evidence of its own
         const double p = j < occupancy_.size() ? occupancy_[j] : 0.5;
         double evidence = Logit(p) - prior_.LogOddsOfCells(c1 - c0);
@@ -140,7 +171,7 @@ class RayTracer {
           break;
         }
       }
-      if (t_in >= t_end) done = true;
+      if (t_in >= t_last_entry) done = true;
     }
     return t_in;
   }
@@ -192,18 +223,20 @@ void LocalGrid::Grow() {
   mask_ = entries_.size() - 1;
   for (const Entry& e : old) {
     if (e.packed == kEmpty) continue;
-    std::size_t i = HashPacked(e.packed) & mask_;
-    while (entries_[i].packed != kEmpty) i = (i + 1) & mask_;
-    entries_[i] = e;
+    Probe probe(e.packed, mask_);
+    while (entries_[probe.slot()].packed != kEmpty) probe.Next();
+    entries_[probe.slot()] = e;
   }
   last_ = 0;
 }
 
 std::size_t LocalGrid::SlotOf(std::uint64_t packed) {
   if (2 * (size_ + 1) > entries_.size()) Grow();
-  std::size_t i = HashPacked(packed) & mask_;
-  while (entries_[i].packed != packed && entries_[i].packed != kEmpty) i = (i + 1) & mask_;
-  return i;
+  Probe probe(packed, mask_);
+  while (entries_[probe.slot()].packed != packed && entries_[probe.slot()].packed != kEmpty) {
+    probe.Next();
+  }
+  return probe.slot();
 }
 
 void LocalGrid::Fold(std::size_t slot, std::uint64_t packed, float a, float b) {
@@ -249,10 +282,8 @@ void LocalGrid::Merge(const LocalGrid& other) {
 }
 
 const LocalGrid::Entry* LocalGrid::Find(std::uint64_t packed) const {
-  std::size_t i = HashPacked(packed) & mask_;
-  while (entries_[i].packed != kEmpty) {
-    if (entries_[i].packed == packed) return &entries_[i];
-    i = (i + 1) & mask_;
+  for (Probe probe(packed, mask_); entries_[probe.slot()].packed != kEmpty; probe.Next()) {
+    if (entries_[probe.slot()].packed == packed) return &entries_[probe.slot()];
   }
   return nullptr;
 }

@@ -306,9 +306,15 @@ std::optional<std::vector<octomap::OcTreeKey>> WorldMap::ChangedKeysSince(
     std::uint64_t version) const {
   if (version < oldest_complete_version_) return std::nullopt;
   std::vector<octomap::OcTreeKey> keys;
+  std::size_t versions = 0;
   for (const Change& change : changes_) {
-    if (change.version > version) keys.insert(keys.end(), change.keys.begin(), change.keys.end());
+    if (change.version > version) {
+      keys.insert(keys.end(), change.keys.begin(), change.keys.end());
+      ++versions;
+    }
   }
+  // One version lists each key once (a render or commit re-fuses every key at most once).
+  if (versions <= 1) return keys;
   std::sort(keys.begin(), keys.end(), [](const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
     return std::lexicographical_compare(a.k, a.k + 3, b.k, b.k + 3);
   });

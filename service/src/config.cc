@@ -95,8 +95,11 @@ bool ValidateLimits(const fusion::v1::QueryLimits& limits, std::string* error) {
   if (limits.max_points_per_query() == 0) {
     return Fail(error, "limits.max_points_per_query", "must be positive");
   }
-  if (limits.max_voxels_per_page() == 0 || limits.max_voxels_per_page() > 1'000'000) {
-    return Fail(error, "limits.max_voxels_per_page", "must lie in 1..1000000");
+  // A page of voxels is one gRPC message: 50000 voxels (~55 bytes each) stay under the 4 MB
+  // that gRPC clients accept by default.
+  if (limits.max_voxels_per_page() == 0 || limits.max_voxels_per_page() > 50'000) {
+    return Fail(error, "limits.max_voxels_per_page",
+                "must lie in 1..50000 (a page is one gRPC message, at most 4 MB)");
   }
   if (limits.max_box_voxels() == 0) return Fail(error, "limits.max_box_voxels", "must be positive");
   if (limits.snapshot_chunk_bytes() < 1024 || limits.snapshot_chunk_bytes() > (3u << 20)) {

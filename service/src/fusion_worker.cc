@@ -9,7 +9,15 @@
 #include <cerrno>
 #include <cstring>
 
+#include "fusion/core/octree_edit.h"
+
 namespace fusion::service {
+namespace {
+
+// Above this many changed voxels a render updates the published map's inner nodes in one pass.
+constexpr std::size_t kLazyUpdateKeys = 4096;
+
+}  // namespace
 
 FusionWorker::FusionWorker(WorkerOptions options, std::vector<SensorSetup> sensors,
                            IngestQueues* queues, SnapshotHub* hub)
@@ -145,31 +153,32 @@ void FusionWorker::RenderAndPublishLocked() {
     return;
   }
   dirty_ = false;
+  const auto rendered = std::chrono::steady_clock::now();
   const std::uint64_t integrated = integrated_.load();
   auto since = map_->ChangedKeysSince(rendered_map_version_);
   std::vector<octomap::OcTreeKey> changed;
   const bool full_refresh = !since;
   if (since) changed = std::move(*since);
   rendered_map_version_ = map_->version();
-  // Voxels that lost their information must disappear from the published map. OctoMap 1.9's
-  // deleteNode frees an emptied inner node without its child array (an assertion in the node
-  // destructor), so such a render rebuilds the published map instead of deleting nodes.
-  bool rebuild = full_refresh;
-  std::vector<std::pair<octomap::OcTreeKey, float>> updates;
-  updates.reserve(changed.size());
-  for (const auto& key : changed) {
-    const auto value = FusedLogOddsLocked(key);
-    if (value) {
-      updates.emplace_back(key, *value);
-    } else if (published_->search(key) != nullptr) {
-      rebuild = true;
-    }
-  }
-  if (rebuild) {
-    if (full_refresh) spdlog::warn("worker: change history exhausted; rebuilding the map");
+  if (full_refresh) {
+    spdlog::warn("worker: change history exhausted; rebuilding the map");
     RebuildPublishedLocked();
   } else {
-    for (const auto& [key, value] : updates) published_->setNodeValue(key, value);
+    // Many changes (a first render, a new sensor pose): set the leaves alone and refresh the
+    // inner nodes in one pass at the end, instead of along every leaf's path.
+    const bool lazy = changed.size() > kLazyUpdateKeys;
+    for (const auto& key : changed) {
+      // Voxels that lost their information disappear from the published map.
+      if (const auto value = FusedLogOddsLocked(key)) {
+        published_->setNodeValue(key, *value, lazy);
+      } else {
+        (void)DeleteVoxel(*published_, key);
+      }
+    }
+    if (lazy) {
+      published_->updateInnerOccupancy();
+      published_->prune();  // as setNodeValue would have, leaf by leaf
+    }
   }
   for (const auto& sensor : sensors_) {
     if (const BeamGrid* grid = map_->beam_grid(sensor.id)) {
@@ -182,9 +191,11 @@ void FusionWorker::RenderAndPublishLocked() {
   in_map_.store(integrated);
   renders_.fetch_add(1);
   spdlog::debug(
-      "worker: rendered version {} ({} voxels changed) in {:.1f} ms",
+      "worker: rendered version {} ({} voxels changed) in {:.1f} ms ({:.1f} ms rendering and "
+      "fusing the beam grids)",
       version_offset_ + rendered_map_version_, changed_count,
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count(),
+      std::chrono::duration<double, std::milli>(rendered - start).count());
 }
 
 void FusionWorker::RebuildPublishedLocked() {

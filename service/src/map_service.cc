@@ -131,11 +131,14 @@ class SnapshotWriter final : public grpc::ServerWriteReactor<fusion::v1::Snapsho
 
 class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate> {
  public:
-  UpdateWriter(ServiceState* state, std::uint64_t since)
-      : state_(state), sent_version_(since), full_next_(since == 0) {
-    std::lock_guard<std::mutex> lock(mutex_);
+  UpdateWriter(ServiceState* state, std::uint64_t since, bool versions_only)
+      : state_(state), sent_version_(since), full_next_(since == 0), versions_only_(versions_only) {
+    // Subscribed before taking mutex_: the hub calls OnPublish with its subscriber lock held,
+    // and OnPublish takes mutex_ (one lock order). A publish in between waits for started_.
     subscription_ = state_->hub->Subscribe([this] { OnPublish(); });
+    std::lock_guard<std::mutex> lock(mutex_);
     PrepareLocked(/*first=*/true);
+    started_ = true;
     WriteNextLocked();
   }
   void OnWriteDone(bool ok) override {
@@ -161,7 +164,7 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   void OnPublish() {
     std::lock_guard<std::mutex> lock(mutex_);
     if (finished_ || cancelled_) return;
-    if (pending_.empty() && !writing_) {
+    if (started_ && pending_.empty() && !writing_) {
       PrepareLocked(false);
       WriteNextLocked();
     } else {
@@ -173,6 +176,14 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   void PrepareLocked(bool first) {
     const auto snapshot = state_->hub->Current();
     if (!first && snapshot->version <= sent_version_) return;
+    if (versions_only_) {
+      pending_.emplace_back();
+      pending_.back().set_map_version(snapshot->version);
+      pending_.back().set_from_version(sent_version_);
+      pending_.back().set_complete(true);
+      sent_version_ = snapshot->version;
+      return;
+    }
     const octomap::OcTree& tree = *snapshot->tree;
     const std::size_t per_message = state_->config.limits().max_voxels_per_page();
     std::vector<octomap::OcTreeKey> keys;
@@ -234,8 +245,10 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   int subscription_ = 0;
   std::uint64_t sent_version_;
   bool full_next_;
+  bool versions_only_;
   std::deque<fusion::v1::MapUpdate> pending_;
   fusion::v1::MapUpdate current_;
+  bool started_ = false;  // the first messages are prepared
   bool writing_ = false;
   bool more_ = false;
   bool cancelled_ = false;
@@ -615,7 +628,7 @@ grpc::ServerWriteReactor<fusion::v1::MapUpdate>* MapService::StreamUpdates(
         Status(StatusCode::UNAVAILABLE, "fusiond is shutting down"));
   }
   try {
-    return new UpdateWriter(state_, request->since_version());
+    return new UpdateWriter(state_, request->since_version(), request->versions_only());
   } catch (const std::exception& e) {
     return new ErrorWriter<fusion::v1::MapUpdate>(
         Status(StatusCode::INTERNAL, std::string("StreamUpdates: ") + e.what()));

@@ -9,6 +9,16 @@ SnapshotHub::SnapshotHub(std::size_t max_logged_keys, double resolution_m)
   auto empty = std::make_shared<MapSnapshot>();
   empty->tree = std::make_shared<octomap::OcTree>(resolution_m);
   current_ = std::move(empty);
+  notifier_ = std::thread([this] { NotifierLoop(); });
+}
+
+SnapshotHub::~SnapshotHub() {
+  {
+    std::lock_guard<std::mutex> lock(notify_mutex_);
+    stop_notifier_ = true;
+  }
+  notify_cv_.notify_all();
+  notifier_.join();
 }
 
 std::shared_ptr<const MapSnapshot> SnapshotHub::Current() const {
@@ -81,8 +91,34 @@ bool SnapshotHub::closed() const {
 }
 
 void SnapshotHub::Notify() {
-  std::lock_guard<std::mutex> lock(subscribers_mutex_);
-  for (auto& entry : subscribers_) entry.second();
+  {
+    std::lock_guard<std::mutex> lock(notify_mutex_);
+    ++requested_;
+  }
+  notify_cv_.notify_all();
+}
+
+void SnapshotHub::Flush() {
+  std::unique_lock<std::mutex> lock(notify_mutex_);
+  const std::uint64_t target = requested_;
+  notify_cv_.wait(lock, [&] { return delivered_ >= target || stop_notifier_; });
+}
+
+void SnapshotHub::NotifierLoop() {
+  std::unique_lock<std::mutex> lock(notify_mutex_);
+  while (true) {
+    notify_cv_.wait(lock, [&] { return requested_ != delivered_ || stop_notifier_; });
+    if (stop_notifier_) return;
+    const std::uint64_t target = requested_;
+    lock.unlock();
+    {
+      std::lock_guard<std::mutex> subscribers_lock(subscribers_mutex_);
+      for (auto& entry : subscribers_) entry.second();
+    }
+    lock.lock();
+    delivered_ = target;
+    notify_cv_.notify_all();  // Flush
+  }
 }
 
 }  // namespace fusion::service

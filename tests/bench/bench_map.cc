@@ -76,6 +76,33 @@ void BM_RenderSr3000(benchmark::State& state) {
 }
 BENCHMARK(BM_RenderSr3000)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The same at fusiond's default map settings (5 cm voxels, rays to 9 m), one thread, for a
+// grid of 1 frame (the first render of a period) and of 30.
+void BM_RenderSr3000ServiceDefaults(benchmark::State& state) {
+  const Fixture& f = SharedFixture();
+  fusion::BeamGrid grid(f.sr.spec, GridOptions());
+  for (int i = 0; i < state.range(0); ++i) {
+    const auto& cloud = f.frames[static_cast<std::size_t>(i) % f.frames.size()];
+    grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
+  }
+  fusion::RenderOptions options;
+  options.resolution_m = 0.05;
+  options.max_range_m = 9.0;
+  fusion::RenderStats stats;
+  for (auto _ : state) {
+    auto local = fusion::RenderBeamGrid(grid, f.sr.T_world_sensor, options, &stats);
+    benchmark::DoNotOptimize(local.size());
+  }
+  state.counters["voxels"] = static_cast<double>(stats.voxels);
+  state.counters["segments"] = static_cast<double>(stats.segments);
+  state.counters["rays"] = static_cast<double>(stats.rays_traced);
+}
+BENCHMARK(BM_RenderSr3000ServiceDefaults)
+    ->Arg(1)
+    ->Arg(kStationaryFrames)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
 // Rendering and fusing a 30-frame SR-3000 period into a 2 cm world map
 // (re-render of the same period: replaces the sensor's live contribution).
 void BM_RenderAndFuseSr3000(benchmark::State& state) {

@@ -111,7 +111,7 @@ TEST(ClientsRecordReplayTest, ReliableFastReplayIsRecordedIdentically) {
 }
 
 TEST(ClientsRecordReplayTest, BrokenRecordStopsReplayAfterEverythingBeforeIt) {
-  const std::string domain = std::to_string(fusion::testing::PrivateDomainId() + 1);
+  const std::string domain = std::to_string(fusion::testing::PrivateDomainId(1));
   const std::string input = MakeRecording("broken.frec", 0.2);
   // Corrupt a byte near the end of record 3's payload (records are equal-sized here).
   std::string bytes;
@@ -153,7 +153,7 @@ TEST(ClientsRecordReplayTest, BrokenRecordStopsReplayAfterEverythingBeforeIt) {
 }
 
 TEST(ClientsRecordReplayTest, ReplayKeepsTheRecordedPaceUnlessFast) {
-  const std::string domain = std::to_string(fusion::testing::PrivateDomainId() + 2);
+  const std::string domain = std::to_string(fusion::testing::PrivateDomainId(2));
   const std::string input = MakeRecording("paced.frec", 0.25);  // 1.0 s from first to last
   const auto time_replay = [&](std::vector<std::string> extra) {
     std::vector<std::string> argv = {"fusion-replay",  input, "--domain", domain,
@@ -179,7 +179,7 @@ TEST(ClientsSimSensorTest, SimulatedFramesAreRecorded) {
   if (access((kTools + "fusion-sim-sensor").c_str(), X_OK) != 0) {
     GTEST_SKIP() << "fusion-sim-sensor not built (needs core/sim)";
   }
-  const std::string domain = std::to_string(fusion::testing::PrivateDomainId() + 3);
+  const std::string domain = std::to_string(fusion::testing::PrivateDomainId(3));
   const std::string output = TempPath("sim.frec");
   Subprocess recorder({kTools + "fusion-record", "-o", output, "--domain", domain, "--reliable",
                        "--count", "3", "--quiet"});

@@ -61,7 +61,7 @@ class FusiondServiceTest : public ::testing::Test {
     // A domain per test: a fusiond killed with SIGKILL stays a matched (dead) reader in its
     // domain until its DDS lease expires, and reliable writers would wait for its acks.
     static unsigned test_index = 0;
-    domain_ = 1 + (fusion::testing::PrivateDomainId() + 41 * test_index++) % 200;
+    domain_ = fusion::testing::PrivateDomainId(test_index++);
     dir_ = ::testing::TempDir() + "fusiond_service_" + std::to_string(getpid()) + "_" +
            ::testing::UnitTest::GetInstance()->current_test_info()->name();
     fs::remove_all(dir_);
@@ -76,7 +76,7 @@ class FusiondServiceTest : public ::testing::Test {
                            << "map { resolution_m: 0.05 render_interval_ms: 100 }\n"
                            << "ingest { reliability: \"reliable\" max_points: 100000 }\n"
                            << "limits { max_points_per_query: 1000 max_box_voxels: 2000000 "
-                           << "max_voxels_per_page: 1000000 }\n"
+                           << "max_voxels_per_page: 50000 }\n"
                            << "persistence { path: \"" << snapshot_ << "\" interval_s: 1 }\n";
   }
 
@@ -125,23 +125,29 @@ class FusiondServiceTest : public ::testing::Test {
     return {};
   }
 
+  // One simulated SR-3000 frame of the board scene from the origin.
+  void PublishBoardFrame(TestPublisher& publisher, std::uint64_t seq) {
+    auto spec = fusion::sim::WithTessellation(*fusion::SensorPreset("sr3000"), kCols, kRows);
+    fusion::sim::RangeSimulator simulator(fusion::sim::PaperBoardScene(), spec);
+    simulator.Reseed(seq);  // each frame its own noise
+    const Eigen::Isometry3d pose = fusion::sim::ForwardLookingPose(Eigen::Vector3d::Zero());
+    const auto frame = simulator.Capture(pose);
+    TestCloud cloud;
+    cloud.sequence_number = seq;
+    cloud.SetPose(pose);
+    cloud.width = frame.cols;
+    cloud.height = frame.rows;
+    cloud.xyz = frame.xyz;
+    cloud.beyond_range = frame.beyond_range;
+    EXPECT_TRUE(publisher.Publish(cloud));
+  }
+
   // Publishes simulated frames of the board scene until the board is occupied and the space
   // in front of it free. Returns the map version that showed it.
   std::uint64_t MapTheBoard(TestPublisher& publisher) {
-    auto spec = fusion::sim::WithTessellation(*fusion::SensorPreset("sr3000"), kCols, kRows);
-    fusion::sim::RangeSimulator simulator(fusion::sim::PaperBoardScene(), spec);
-    const Eigen::Isometry3d pose = fusion::sim::ForwardLookingPose(Eigen::Vector3d::Zero());
     const auto end = std::chrono::steady_clock::now() + 20s;
     for (std::uint64_t seq = 1; std::chrono::steady_clock::now() < end; ++seq) {
-      const auto frame = simulator.Capture(pose);
-      TestCloud cloud;
-      cloud.sequence_number = seq;
-      cloud.SetPose(pose);
-      cloud.width = frame.cols;
-      cloud.height = frame.rows;
-      cloud.xyz = frame.xyz;
-      cloud.beyond_range = frame.beyond_range;
-      EXPECT_TRUE(publisher.Publish(cloud));
+      PublishBoardFrame(publisher, seq);
       std::this_thread::sleep_for(100ms);
       std::uint64_t version = 0;
       // A few frames at least: one frame leaves p(B) of a beam diffuse (the prior still weighs).
@@ -301,10 +307,33 @@ TEST_F(FusiondServiceTest, SurfacesAppearAndEveryQueryAnswersThem) {
     v1::StreamUpdatesRequest request;
     auto reader = stub_->StreamUpdates(&context, request);
     v1::MapUpdate update;
-    ASSERT_TRUE(reader->Read(&update));
+    ASSERT_TRUE(reader->Read(&update)) << reader->Finish().error_message();
     EXPECT_TRUE(update.full());
     EXPECT_GE(update.map_version(), version);
     EXPECT_GT(update.voxels_size(), 100);
+    context.TryCancel();
+    reader->Finish();
+  }
+  // A versions-only stream announces the current version, then the version a new frame makes,
+  // without voxels.
+  {
+    grpc::ClientContext context;
+    context.set_deadline(In(10s));
+    v1::StreamUpdatesRequest request;
+    request.set_since_version(version);
+    request.set_versions_only(true);
+    auto reader = stub_->StreamUpdates(&context, request);
+    v1::MapUpdate update;
+    ASSERT_TRUE(reader->Read(&update));
+    const std::uint64_t announced = update.map_version();
+    EXPECT_GE(announced, version);
+    EXPECT_EQ(update.voxels_size(), 0);
+    EXPECT_TRUE(update.complete());
+    PublishBoardFrame(publisher, 1000);
+    ASSERT_TRUE(reader->Read(&update));
+    EXPECT_GT(update.map_version(), announced);
+    EXPECT_EQ(update.from_version(), announced);
+    EXPECT_EQ(update.voxels_size(), 0);
     context.TryCancel();
     reader->Finish();
   }
@@ -495,12 +524,13 @@ TEST_F(FusiondServiceTest, MalformedCloudsAndBadRequestsAreRejectedWhileServing)
   box.clear_page_token();
   box.set_page_size(1u << 30);
   EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::RESOURCE_EXHAUSTED);
-  // A page of 800 000 unknown voxels with a deadline too short to build it (the server checks
-  // the deadline while walking; the client would also give up on its own).
+  // A page of 50 000 unknown voxels (the configured page size) with a deadline too short to
+  // build it (the server checks the deadline while walking; the client would also give up on
+  // its own).
   box.set_page_size(0);
   box.add_states(v1::VOXEL_STATE_UNKNOWN);
   *box.mutable_max() = P({4.95, 4.95, 3.95});
-  EXPECT_EQ(QueryBoxStatus(*stub_, box, 20ms), grpc::StatusCode::DEADLINE_EXCEEDED);
+  EXPECT_EQ(QueryBoxStatus(*stub_, box, 2ms), grpc::StatusCode::DEADLINE_EXCEEDED);
   // The same box in pages of 1000 answers in time.
   box.set_page_size(1000);
   EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::OK);

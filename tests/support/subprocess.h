@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -100,7 +101,27 @@ class Subprocess {
   std::optional<int> exit_status_;
 };
 
-// A DDS domain id private to this test process (tests run in parallel).
-inline unsigned PrivateDomainId() { return 1 + static_cast<unsigned>(getpid()) % 200; }
+// DDS domain ids private to this test process (tests run in parallel): the n-th id this
+// process holds, n = 0, 1, ... Each id in 1..200 is claimed with an exclusive lock on
+// /tmp/fusion-test-dds-domain-<id>.lock, released when the process exits, so two test
+// processes never share a domain (a pid-derived guess alone collides now and then).
+inline unsigned PrivateDomainId(unsigned n = 0) {
+  static std::vector<unsigned> held;
+  static unsigned next = static_cast<unsigned>(getpid());
+  for (unsigned tries = 0; held.size() <= n && tries < 200; ++tries) {
+    const unsigned id = 1 + next++ % 200;
+    const std::string path = "/tmp/fusion-test-dds-domain-" + std::to_string(id) + ".lock";
+    const int fd = open(path.c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0666);
+    if (fd < 0) continue;
+    if (flock(fd, LOCK_EX | LOCK_NB) == 0) {
+      held.push_back(id);  // the descriptor stays open: the lock lasts as long as the process
+    } else {
+      close(fd);
+    }
+  }
+  // Every id taken (or /tmp not writable): fall back to a guess.
+  if (held.size() <= n) return 1 + (static_cast<unsigned>(getpid()) + 41 * n) % 200;
+  return held[n];
+}
 
 }  // namespace fusion::testing

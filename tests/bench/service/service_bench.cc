@@ -7,9 +7,12 @@
 //      stream at 30 Hz each
 //   4. samples dropped with sr3000 at 30 Hz and stoc (160 x 120) at 15 Hz
 // Usage: service_bench [--seconds S] [--trials N] [--log-level LEVEL] [--max-range M]
+//                      [--config TEXT] [--only LIST]
 //   --seconds: duration of scenarios 3 and 4 (default 10); --trials: scenario 1 (default 20);
 //   --log-level: fusiond's (default warn; debug logs render times, written to
-//   /tmp/service_bench_fusiond.log).
+//   /tmp/service_bench_fusiond.log); --max-range: map.max_range_m; --config: more fusiond
+//   configuration (text format, e.g. "map { render_threads: 1 }"); --only: scenarios to run,
+//   e.g. 1,3 (default all; 2 and 3 need the board mapped by 1).
 #include <grpcpp/grpcpp.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -17,6 +20,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -25,6 +29,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -178,6 +183,57 @@ StreamStats Stream(dds_entity_t writer, const SensorStream& s, double hz, std::u
   return stats;
 }
 
+// Follows StreamUpdates and notes when each map version arrived complete: the moment a planner
+// that subscribes learns of it, without the load of polling.
+class VersionWatcher {
+ public:
+  VersionWatcher(v1::FusionMap::Stub& stub, std::uint64_t since) {
+    v1::StreamUpdatesRequest request;
+    request.set_since_version(since);
+    request.set_versions_only(true);
+    reader_ = stub.StreamUpdates(&context_, request);
+    thread_ = std::thread([this] {
+      v1::MapUpdate update;
+      while (reader_->Read(&update)) {
+        if (!update.complete()) continue;
+        const auto now = Clock::now();
+        std::lock_guard<std::mutex> lock(mutex_);
+        arrivals_.emplace_back(update.map_version(), now);
+        changed_.notify_all();
+      }
+    });
+  }
+  ~VersionWatcher() {
+    context_.TryCancel();
+    thread_.join();
+    (void)reader_->Finish();
+  }
+  // Arrival time of the first version newer than `after`, waiting up to `timeout`.
+  std::optional<std::pair<std::uint64_t, Clock::time_point>> FirstAfter(
+      std::uint64_t after, std::chrono::milliseconds timeout) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    std::optional<std::pair<std::uint64_t, Clock::time_point>> found;
+    changed_.wait_for(lock, timeout, [&] {
+      for (const auto& a : arrivals_) {
+        if (a.first > after) {
+          found = a;
+          return true;
+        }
+      }
+      return false;
+    });
+    return found;
+  }
+
+ private:
+  grpc::ClientContext context_;
+  std::unique_ptr<grpc::ClientReader<v1::MapUpdate>> reader_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::vector<std::pair<std::uint64_t, Clock::time_point>> arrivals_;
+  std::thread thread_;
+};
+
 class Client {
  public:
   explicit Client(const std::string& address)
@@ -256,6 +312,12 @@ int main(int argc, char** argv) {
   int trials = 20;
   std::string log_level = "warn";
   double max_range_m = 0.0;  // map.max_range_m; 0: the default (each sensor's full range)
+  std::string extra_config;
+  std::string only = "1,2,3,4";
+  if (argc % 2 == 0) {
+    std::fprintf(stderr, "usage: see the comment at the top of service_bench.cc\n");
+    return 2;
+  }
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string flag = argv[i];
     if (flag == "--seconds")
@@ -266,6 +328,10 @@ int main(int argc, char** argv) {
       trials = std::atoi(argv[i + 1]);
     else if (flag == "--log-level")
       log_level = argv[i + 1];
+    else if (flag == "--config")
+      extra_config = argv[i + 1];
+    else if (flag == "--only")
+      only = argv[i + 1];
     else {
       std::fprintf(stderr, "unknown flag %s\n", flag.c_str());
       return 2;
@@ -301,6 +367,8 @@ int main(int argc, char** argv) {
                         << "sensors { id: \"stoc\" preset: \"stoc\" cols: 160 rows: 120 }\n";
   if (max_range_m > 0.0)
     std::ofstream(config, std::ios::app) << "map { max_range_m: " << max_range_m << " }\n";
+  if (!extra_config.empty()) std::ofstream(config, std::ios::app) << extra_config << "\n";
+  const auto run = [&only](char scenario) { return only.find(scenario) != std::string::npos; };
   const unsigned domain = 100 + static_cast<unsigned>(getpid()) % 100;
   // fusiond logs on stderr: through a shell that joins it to stdout, which Subprocess reads.
   fusion::testing::Subprocess fusiond(
@@ -315,6 +383,12 @@ int main(int argc, char** argv) {
       "fusiond: %s --config %s --listen 127.0.0.1:0 --dds-domain %u --log-level %s "
       "(port %s)\n\n",
       kFusiond.c_str(), config.c_str(), domain, log_level.c_str(), port->c_str());
+  {
+    std::ifstream in(config);
+    std::stringstream text;
+    text << in.rdbuf();
+    std::printf("configuration:\n\n```\n%s```\n\n", text.str().c_str());
+  }
   Client client("127.0.0.1:" + *port);
   // fusiond logs to its stdout (spdlog's default logger): keep draining the pipe so verbose
   // levels cannot block it, and keep the text for the end.
@@ -338,25 +412,30 @@ int main(int argc, char** argv) {
   std::uint64_t sr_seq = 0, stoc_seq = 0;
 
   // ---- 1. DDS-to-queryable latency of one SR-3000 frame --------------------------------
-  // Writes one frame at t0 and polls QueryPoints on a board voxel every ~0.5 ms until a newer
-  // map version answers (and, after a reset, shows the voxel). Nothing else is published, so
-  // the first newer version is the render that contains the frame.
-  const auto frame_to_queryable = [&](std::uint64_t after_version, bool need_board,
+  // Writes one frame at t0 and waits for the next map version on a StreamUpdates subscription
+  // (a version is queryable once published, and the stream carries it right after); a
+  // QueryPoints on a board voxel then confirms that version answers (and, after a reset, shows
+  // the board). Nothing else is published, so the first newer version is the render that
+  // contains the frame. Polling QueryPoints instead would itself load the 2 cores.
+  const auto frame_to_queryable = [&](VersionWatcher& watcher, std::uint64_t after_version,
+                                      bool need_board,
                                       const sim::OrganizedCloud& frame) -> double {
     const auto t0 = Clock::now();
     Publisher::Write(sr_writer, sr.id, ++sr_seq, sr.pose, frame);
     while (Clock::now() - t0 < 3s) {
+      const auto arrival = watcher.FirstAfter(after_version, 3000ms);
+      if (!arrival) break;
       grpc::ClientContext context;
       context.set_deadline(In(1000ms));
       v1::QueryPointsRequest request;
       *request.add_points() = P(kOnBoard);
       v1::QueryPointsResponse reply;
       if (client.stub().QueryPoints(&context, request, &reply).ok() &&
-          reply.map_version() > after_version && reply.results_size() == 1 &&
+          reply.map_version() >= arrival->first && reply.results_size() == 1 &&
           (!need_board || reply.results(0).state() != v1::VOXEL_STATE_UNKNOWN)) {
-        return Ms(Clock::now() - t0);
+        return Ms(arrival->second - t0);
       }
-      std::this_thread::sleep_for(500us);
+      after_version = arrival->first;  // not this one: the next
     }
     return -1;  // lost (best effort) or no visible change
   };
@@ -370,7 +449,7 @@ int main(int argc, char** argv) {
                 Percentile(v, 0.9), *std::max_element(v.begin(), v.end()),
                 *std::min_element(v.begin(), v.end()));
   };
-  {
+  if (run('1')) {
     std::printf(
         "## 1. DDS-to-queryable latency, one SR-3000 frame (176 x 144), "
         "render_interval_ms 200 (default)\n\n");
@@ -382,8 +461,10 @@ int main(int argc, char** argv) {
     std::vector<double> after_reset;
     for (int t = 0; t < std::max(3, trials / 4); ++t) {
       const std::uint64_t reset_version = client.Reset();
+      VersionWatcher watcher(client.stub(), reset_version);
       std::this_thread::sleep_for(250ms);
-      const double ms = frame_to_queryable(reset_version, true, sr.frames[t % sr.frames.size()]);
+      const double ms =
+          frame_to_queryable(watcher, reset_version, true, sr.frames[t % sr.frames.size()]);
       if (ms < 0)
         ++timeouts;
       else
@@ -408,10 +489,12 @@ int main(int argc, char** argv) {
     // gap after the previous render spreads over 0..250 ms: frames with a gap < 200 ms wait
     // for the render cadence, the others are rendered as soon as they are integrated.
     std::vector<double> all, idle, cadence;
+    VersionWatcher watcher(client.stub(), version);
     for (int t = 0; t < trials; ++t) {
       const auto gap = std::chrono::microseconds(250000 * t / std::max(1, trials - 1));
       std::this_thread::sleep_for(gap);
-      const double ms = frame_to_queryable(version, false, sr.frames[t % sr.frames.size()]);
+      const double ms =
+          frame_to_queryable(watcher, version, false, sr.frames[t % sr.frames.size()]);
       if (ms < 0) {
         ++timeouts;
         std::this_thread::sleep_for(1000ms);
@@ -436,7 +519,7 @@ int main(int argc, char** argv) {
   }
 
   // ---- 2. Batched QueryPoints throughput -----------------------------------------------
-  {
+  if (run('2')) {
     std::printf(
         "## 2. QueryPoints throughput (one client, end to end incl. client-side "
         "protobuf; random points in the box [0.3,2.2] x [-1,1] x [-0.45,0.75] m)\n\n");
@@ -488,7 +571,7 @@ int main(int argc, char** argv) {
 
   // ---- 3. Small-query latency while two sensors stream at 30 Hz -------------------------
   std::map<std::string, v1::SensorCounters> before, after;
-  {
+  if (run('3')) {
     std::printf(
         "## 3. Small-query latency while sr3000 (176 x 144) and stoc (160 x 120) "
         "stream at 30 Hz each, %.0f s, one query every 2 ms (rotating kinds)\n\n",
@@ -574,7 +657,7 @@ int main(int argc, char** argv) {
   }
 
   // ---- 4. Samples dropped: sr3000 at 30 Hz + stoc at 15 Hz -----------------------------
-  {
+  if (run('4')) {
     std::printf(
         "## 4. Samples lost with sr3000 (176 x 144) at 30 Hz + stoc (160 x 120) at "
         "15 Hz, %.0f s, no queries\n\n",

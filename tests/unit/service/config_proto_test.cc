@@ -97,6 +97,7 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
       {"ingest { reliability: \"sometimes\" }", "ingest.reliability"},
       {"ingest { quaternion_tolerance: 0.9 }", "ingest.quaternion_tolerance"},
       {"limits { snapshot_chunk_bytes: 100000000 }", "limits.snapshot_chunk_bytes"},
+      {"limits { max_voxels_per_page: 50001 }", "limits.max_voxels_per_page"},
   };
   for (const auto& [text, field] : cases) {
     auto config = DefaultConfig();

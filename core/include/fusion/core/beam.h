@@ -90,6 +90,9 @@ class DenseBeam {
   // S(c) = mass of cells >= c plus B_{N+1}, for ascending c in [0, N].
   void TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
                   std::vector<double>* out) const;
+  // The smallest cell c in (from, N] with S(c) < fraction * S(from); N + 1 if there is none.
+  [[nodiscard]] std::uint32_t TailDropCell(const BeamContext& ctx, std::uint32_t from,
+                                           double fraction) const;
   [[nodiscard]] bool touched() const { return touched_; }
   [[nodiscard]] std::size_t MemoryBytes() const;
   void Prefetch() const {}
@@ -123,6 +126,9 @@ class UllBeam {
   void Weights(const BeamContext& ctx, std::vector<double>* weights) const;  // N + 1, unnormalised
   void TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
                   std::vector<double>* out) const;
+  // As DenseBeam::TailDropCell; walks the list from the far end and stops at the crossing.
+  [[nodiscard]] std::uint32_t TailDropCell(const BeamContext& ctx, std::uint32_t from,
+                                           double fraction) const;
   [[nodiscard]] bool touched() const { return touched_; }
   [[nodiscard]] std::size_t MemoryBytes() const;
   // Hints the cache about the memory the next Update will touch (no effect on results).
@@ -176,6 +182,8 @@ class BeamStore {
   virtual void Weights(std::size_t beam, std::vector<double>* weights) const = 0;
   virtual void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
                           std::vector<double>* out) const = 0;
+  [[nodiscard]] virtual std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,
+                                                   double fraction) const = 0;
   [[nodiscard]] virtual bool Touched(std::size_t beam) const = 0;
   virtual void Reset() = 0;
   [[nodiscard]] virtual std::size_t MemoryBytes() const = 0;  // beams only, not the context

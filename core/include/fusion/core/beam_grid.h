@@ -120,6 +120,11 @@ class BeamGrid {
   // interval's prior occupancy is returned. Boundaries are rounded to cell edges.
   void IntervalOccupancy(std::size_t beam, const std::vector<double>& boundaries_m,
                          std::vector<double>* out) const;
+  // Where a ray from from_m on stops carrying information: the range (cell edge) of the first
+  // cell after from_m whose tail mass S is below fraction * S(from_m), i.e. where the chance
+  // that the beam's first hit still lies ahead has fallen below `fraction`. +infinity if
+  // S never falls that low (the beam may see through).
+  [[nodiscard]] double InformationEndM(std::size_t beam, double from_m, double fraction) const;
   // Prior occupancy of an interval of the given length (what an untouched beam reports).
   [[nodiscard]] double PriorOccupancy(double length_m) const;
   // True if the beam has received at least one reading since construction or Reset.

@@ -4,12 +4,14 @@
 
 #include <octomap/OcTree.h>
 
+#include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <thread>
 #include <vector>
 
 namespace fusion::service {
@@ -26,6 +28,9 @@ class SnapshotHub {
   // Until the first Publish, Current() is an empty map of resolution_m.
   explicit SnapshotHub(std::size_t max_logged_keys = kDefaultMaxLoggedKeys,
                        double resolution_m = 0.05);
+  ~SnapshotHub();
+  SnapshotHub(const SnapshotHub&) = delete;
+  SnapshotHub& operator=(const SnapshotHub&) = delete;
 
   [[nodiscard]] std::shared_ptr<const MapSnapshot> Current() const;
   // Publishes a new version. `changed` are the keys whose value changed since the previous
@@ -36,16 +41,21 @@ class SnapshotHub {
   // does not reach back to `since` (the caller then sends the whole map).
   bool ChangedSince(std::uint64_t since, std::vector<octomap::OcTreeKey>* keys) const;
 
-  // Subscribers are called (on the publishing thread, without locks held by the caller) after
-  // every Publish and once on Close; they must be quick and must not call Unsubscribe.
+  // Subscribers are called on the hub's own notifier thread, so that the publisher (the fusion
+  // worker) never waits for them: at least once after every Publish (several publishes in
+  // quick succession may be reported by one call) and after Close. They must not call
+  // Unsubscribe; after Unsubscribe returns, the callback is not called again.
   int Subscribe(std::function<void()> callback);
   void Unsubscribe(int id);
   // No more versions will come (shutdown).
   void Close();
   [[nodiscard]] bool closed() const;
+  // Waits until the subscribers have been called for everything published or closed so far.
+  void Flush();
 
  private:
   void Notify();
+  void NotifierLoop();
 
   mutable std::mutex mutex_;
   std::shared_ptr<const MapSnapshot> current_;
@@ -62,6 +72,13 @@ class SnapshotHub {
   std::mutex subscribers_mutex_;  // held while calling subscribers
   std::map<int, std::function<void()>> subscribers_;
   int next_id_ = 1;
+
+  std::mutex notify_mutex_;
+  std::condition_variable notify_cv_;
+  std::uint64_t requested_ = 0;  // notifications asked for
+  std::uint64_t delivered_ = 0;  // of those, delivered to the subscribers
+  bool stop_notifier_ = false;
+  std::thread notifier_;
 };
 
 }  // namespace fusion::service
