@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "fusion/core/beam.h"
@@ -70,6 +71,33 @@ void ExpectEquivalent(const SensorSpec& s, double cell_size_m, unsigned seed, in
   dense.IntervalOccupancy(0, bounds, &oa);
   ull.IntervalOccupancy(0, bounds, &ob);
   for (std::size_t j = 0; j < oa.size(); ++j) ASSERT_NEAR(oa[j], ob[j], 1e-6) << j;
+  // Where the remaining first-hit mass falls below a fraction of what it was at from_m:
+  // both representations against the tail sums of the dense p(B).
+  for (const double fraction : {1e-2, 0.5, 1e-6}) {
+    for (const double from_m : {0.0, s.r_min_m, 0.5 * s.r_max_m}) {
+      const auto from = static_cast<std::size_t>(std::lround(from_m / cell_size_m));
+      std::vector<double> tail(pa.size() + 1, 0.0);
+      for (std::size_t i = pa.size(); i-- > 0;) tail[i] = tail[i + 1] + pa[i];
+      double expected = std::numeric_limits<double>::infinity();
+      for (std::size_t c = from + 1; c < pa.size(); ++c) {
+        if (tail[c] < fraction * tail[from]) {
+          expected = static_cast<double>(c) * cell_size_m;
+          break;
+        }
+      }
+      for (const BeamGrid* grid : {&dense, &ull}) {
+        const double got = grid->InformationEndM(0, from_m, fraction);
+        if (std::isinf(expected)) {
+          EXPECT_TRUE(std::isinf(got)) << s.name << " seed " << seed << " got " << got;
+        } else {
+          // The dense beam sums exactly as above; the list's sums may put a crossing that
+          // lies right at the threshold one cell off.
+          EXPECT_NEAR(got, expected, grid == &dense ? 1e-12 : 1.01 * cell_size_m)
+              << s.name << " seed " << seed << " from " << from_m << " fraction " << fraction;
+        }
+      }
+    }
+  }
 }
 
 TEST(UllEquivalenceTest, ThirtySeedsBothPresetsFiveMillimetreCells) {
