@@ -28,11 +28,15 @@ std::shared_ptr<const MapSnapshot> SnapshotHub::Current() const {
 
 void SnapshotHub::Publish(std::shared_ptr<const MapSnapshot> snapshot,
                           std::vector<octomap::OcTreeKey> changed, bool reset) {
+  // What the hub lets go of is destroyed after the lock is released: freeing an octree of
+  // 100 000 nodes takes milliseconds, and every query takes this lock for Current().
+  std::shared_ptr<const MapSnapshot> previous_snapshot;
+  std::deque<LogEntry> forgotten;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     const std::uint64_t previous = current_->version;
     if (reset) {
-      log_.clear();
+      forgotten.swap(log_);
       logged_keys_ = 0;
       log_start_version_ = snapshot->version;
     } else if (log_.empty() && logged_keys_ == 0 && log_start_version_ == 0 && previous > 0) {
@@ -44,9 +48,14 @@ void SnapshotHub::Publish(std::shared_ptr<const MapSnapshot> snapshot,
       while (logged_keys_ > max_logged_keys_ && !log_.empty()) {
         logged_keys_ -= log_.front().keys.size();
         log_start_version_ = log_.front().version;
+        forgotten.push_back(std::move(log_.front()));
         log_.pop_front();
       }
     }
+    // The version replaced now stays referenced until the next Publish, so that a query that
+    // still reads it does not end up freeing it on a gRPC thread; the one before goes now.
+    previous_snapshot = std::move(retired_);
+    retired_ = std::move(current_);
     current_ = std::move(snapshot);
   }
   Notify();

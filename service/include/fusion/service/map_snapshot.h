@@ -59,6 +59,7 @@ class SnapshotHub {
 
   mutable std::mutex mutex_;
   std::shared_ptr<const MapSnapshot> current_;
+  std::shared_ptr<const MapSnapshot> retired_;  // the version before current_ (see Publish)
   struct LogEntry {
     std::uint64_t version;
     std::vector<octomap::OcTreeKey> keys;
