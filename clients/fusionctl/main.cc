@@ -47,8 +47,9 @@ Commands:
   render FILE.png [--color height|probability] [--azimuth DEG] [--elevation DEG]
          [--size WxH] [--min-probability P]
                                 a picture of the occupied voxels
-  watch [--since VERSION] [--count N]
-                                stream map updates (Ctrl-C to stop)
+  watch [--since VERSION] [--count N] [--versions-only]
+                                stream map updates (Ctrl-C to stop); --versions-only:
+                                announce new versions without their voxels
   beam SENSOR ROW COL           p(B) and p(m) of one beam, as a table
   reset                         clear the map and every beam grid
   save                          write a snapshot to the service's persistence path
@@ -417,6 +418,8 @@ int Render(Context& ctx, const Args& args) {
 int Watch(Context& ctx, const Args& args) {
   fusion::v1::StreamUpdatesRequest request;
   request.set_since_version(std::strtoull(args.Get("--since", "0").c_str(), nullptr, 10));
+  const bool versions_only = args.Has("--versions-only");
+  request.set_versions_only(versions_only);
   const long count = std::atol(args.Get("--count", "0").c_str());
   grpc::ClientContext context;
   auto reader = ctx.stub->StreamUpdates(&context, request);
@@ -426,9 +429,15 @@ int Watch(Context& ctx, const Args& args) {
   while (reader->Read(&update)) {
     voxels += static_cast<std::size_t>(update.voxels_size());
     if (!update.complete()) continue;
-    std::printf("version %llu (from %llu)%s: %zu voxels changed\n",
-                (unsigned long long)update.map_version(),
-                (unsigned long long)update.from_version(), update.full() ? " full" : "", voxels);
+    if (versions_only) {
+      std::printf("version %llu (from %llu)\n", (unsigned long long)update.map_version(),
+                  (unsigned long long)update.from_version());
+    } else {
+      std::printf("version %llu (from %llu)%s: %zu voxels changed\n",
+                  (unsigned long long)update.map_version(),
+                  (unsigned long long)update.from_version(), update.full() ? " full" : "",
+                  voxels);
+    }
     std::fflush(stdout);
     voxels = 0;
     if (count > 0 && ++versions >= count) {

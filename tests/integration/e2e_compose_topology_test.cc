@@ -127,6 +127,22 @@ TEST_F(E2eComposeTopologyTest, SensorsFusiondAndClientMapTheBoard) {
   ASSERT_EQ(Fusionctl(address_, {"stats"}, &out), 0) << out;
   EXPECT_NE(out.find("resolution_m       0.020"), std::string::npos) << out;
 
+  // While the sensors stream, `watch --versions-only` announces new versions, ascending.
+  ASSERT_EQ(Fusionctl(address_, {"watch", "--count", "3", "--versions-only"}, &out), 0) << out;
+  {
+    const std::regex line(R"(^version (\d+) \(from (\d+)\)$)");
+    std::istringstream in(out);
+    std::vector<unsigned long long> versions;
+    for (std::string text; std::getline(in, text);) {
+      std::smatch m;
+      ASSERT_TRUE(std::regex_match(text, m, line)) << text;
+      versions.push_back(std::stoull(m[1]));
+    }
+    ASSERT_EQ(versions.size(), 3u) << out;
+    EXPECT_LT(versions[0], versions[1]) << out;
+    EXPECT_LT(versions[1], versions[2]) << out;
+  }
+
   // Everything stops cleanly, as `docker compose down` would stop it (SIGTERM).
   EXPECT_EQ(sr3000.Stop(SIGTERM, 10000ms), 0);
   EXPECT_EQ(stoc.Stop(SIGTERM, 10000ms), 0);
