@@ -57,37 +57,16 @@ void BM_IntegrateSr3000Frame(benchmark::State& state) {
 }
 BENCHMARK(BM_IntegrateSr3000Frame)->Unit(benchmark::kMillisecond);
 
-// Rendering a 30-frame SR-3000 beam grid into a 2 cm local grid, on 1 or 2 threads.
-void BM_RenderSr3000(benchmark::State& state) {
+// Renders a beam grid of the first `frames` SR-3000 frames with `options`, timed, and reports
+// the render's counts.
+void RenderSr3000Frames(benchmark::State& state, std::size_t frames,
+                        const fusion::RenderOptions& options) {
   const Fixture& f = SharedFixture();
   fusion::BeamGrid grid(f.sr.spec, GridOptions());
-  for (const auto& cloud : f.frames)
-    grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
-  fusion::RenderOptions options;
-  options.resolution_m = kResolutionM;
-  options.threads = static_cast<unsigned>(state.range(0));
-  fusion::RenderStats stats;
-  for (auto _ : state) {
-    auto local = fusion::RenderBeamGrid(grid, f.sr.T_world_sensor, options, &stats);
-    benchmark::DoNotOptimize(local.size());
-  }
-  state.counters["voxels"] = static_cast<double>(stats.voxels);
-  state.counters["segments"] = static_cast<double>(stats.segments);
-}
-BENCHMARK(BM_RenderSr3000)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
-
-// The same at fusiond's default map settings (5 cm voxels, rays to 9 m), one thread, for a
-// grid of 1 frame (the first render of a period) and of 30.
-void BM_RenderSr3000ServiceDefaults(benchmark::State& state) {
-  const Fixture& f = SharedFixture();
-  fusion::BeamGrid grid(f.sr.spec, GridOptions());
-  for (int i = 0; i < state.range(0); ++i) {
-    const auto& cloud = f.frames[static_cast<std::size_t>(i) % f.frames.size()];
+  for (std::size_t i = 0; i < frames; ++i) {
+    const auto& cloud = f.frames[i % f.frames.size()];
     grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
   }
-  fusion::RenderOptions options;
-  options.resolution_m = 0.05;
-  options.max_range_m = 9.0;
   fusion::RenderStats stats;
   for (auto _ : state) {
     auto local = fusion::RenderBeamGrid(grid, f.sr.T_world_sensor, options, &stats);
@@ -96,6 +75,24 @@ void BM_RenderSr3000ServiceDefaults(benchmark::State& state) {
   state.counters["voxels"] = static_cast<double>(stats.voxels);
   state.counters["segments"] = static_cast<double>(stats.segments);
   state.counters["rays"] = static_cast<double>(stats.rays_traced);
+}
+
+// Rendering a 30-frame SR-3000 beam grid into a 2 cm local grid, on 1 or 2 threads.
+void BM_RenderSr3000(benchmark::State& state) {
+  fusion::RenderOptions options;
+  options.resolution_m = kResolutionM;
+  options.threads = static_cast<unsigned>(state.range(0));
+  RenderSr3000Frames(state, kStationaryFrames, options);
+}
+BENCHMARK(BM_RenderSr3000)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The same at fusiond's default map settings (5 cm voxels, rays to 9 m), one thread, for a
+// grid of 1 frame (the first render of a period) and of 30.
+void BM_RenderSr3000ServiceDefaults(benchmark::State& state) {
+  fusion::RenderOptions options;
+  options.resolution_m = 0.05;
+  options.max_range_m = 9.0;
+  RenderSr3000Frames(state, static_cast<std::size_t>(state.range(0)), options);
 }
 BENCHMARK(BM_RenderSr3000ServiceDefaults)
     ->Arg(1)
