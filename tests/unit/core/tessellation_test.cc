@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <limits>
+#include <random>
 
 #include "fusion/core/beam_grid.h"
 
@@ -61,6 +62,48 @@ TEST(TessellationTest, OutsideFovZeroAndNonFiniteGiveNoBeam) {
   EXPECT_EQ(t.BeamOf(Eigen::Vector3d(std::sin(h), 0, std::cos(h))).value() % 176, 175u);
   EXPECT_EQ(t.BeamOf(Eigen::Vector3d(-std::sin(h), 0, std::cos(h))).value() % 176, 0u);
   EXPECT_THROW((void)t.Direction(t.beam_count()), std::out_of_range);
+}
+
+// BeamOf compares tangents against tables; BeamOfByAngles is the definition (atan2). They
+// agree on every direction that is not within 1e-9 rad of a beam edge, inside and outside the
+// FOV, for narrow and single-beam tessellations; a FOV of 180 degrees or more uses the angles.
+TEST(TessellationTest, TangentTablesAgreeWithTheAngles) {
+  SensorSpec one_column = *SensorPreset("stoc");
+  one_column.cols = 1;
+  one_column.rows = 3;
+  SensorSpec wide = *SensorPreset("sr3000");
+  wide.fov_h_rad = 4.7;  // a 270-degree scanner
+  wide.cols = 540;
+  for (const SensorSpec& spec : {*SensorPreset("sr3000"), *SensorPreset("stoc"), one_column, wide}) {
+    const BeamTessellation t(spec);
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const auto near_edge = [](double angle, double fov, int n) {
+      const double w = fov / n;
+      const double k = (angle + 0.5 * fov) / w;
+      return std::abs(k - std::round(k)) * w < 1e-9;
+    };
+    int compared = 0, inside = 0;
+    for (int i = 0; i < 200000; ++i) {
+      // Directions in a cone a little wider than the FOV, at assorted ranges.
+      const double az = 0.6 * spec.fov_h_rad * u(rng);
+      const double el = 0.6 * spec.fov_v_rad * u(rng);
+      const double r = 0.1 + 5.0 * (u(rng) + 1.0);
+      const Eigen::Vector3d d(r * std::cos(el) * std::sin(az), -r * std::sin(el),
+                              r * std::cos(el) * std::cos(az));
+      if (near_edge(std::atan2(d.x(), d.z()), spec.fov_h_rad, spec.cols) ||
+          near_edge(std::atan2(-d.y(), std::hypot(d.x(), d.z())), spec.fov_v_rad, spec.rows)) {
+        continue;
+      }
+      ++compared;
+      const auto fast = t.BeamOf(d);
+      ASSERT_EQ(fast, t.BeamOfByAngles(d)) << spec.name << " " << d.transpose();
+      inside += fast.has_value() ? 1 : 0;
+    }
+    EXPECT_GT(compared, 190000);
+    EXPECT_GT(inside, compared / 2);       // most directions fall inside the FOV,
+    EXPECT_LT(inside, compared * 9 / 10);  // and a good share outside
+  }
 }
 
 }  // namespace

@@ -25,7 +25,12 @@ class BeamTessellation {
   [[nodiscard]] int cols() const;
   [[nodiscard]] int rows() const;
   // Beam of a direction in the sensor frame, std::nullopt outside the FOV or for a zero vector.
+  // For FOVs narrower than 180 degrees both angles are compared through their tangents with
+  // the beam edges' (x / z and -y / hypot(x, z) against tables: no atan2); directions within
+  // ~1e-15 rad of an edge may fall on either side of it.
   [[nodiscard]] std::optional<std::size_t> BeamOf(const Eigen::Vector3d& p_sensor) const;
+  // The same by the definition above (two atan2 per direction): the reference.
+  [[nodiscard]] std::optional<std::size_t> BeamOfByAngles(const Eigen::Vector3d& p_sensor) const;
   // Unit vector of the beam's centre line in the sensor frame.
   [[nodiscard]] Eigen::Vector3d Direction(std::size_t beam) const;
   // Angular size of one beam (full widths).
@@ -37,6 +42,28 @@ class BeamTessellation {
   int rows_ = 1;
   double fov_h_rad_ = 0.0;
   double fov_v_rad_ = 0.0;
+  // Ascending edges (n + 1 values) with a uniform bucket index over them, so that the inner
+  // edges below a value are counted in ~one step instead of a binary search.
+  class Edges {
+   public:
+    Edges() = default;
+    explicit Edges(std::vector<double> edges);
+    [[nodiscard]] bool empty() const { return edges_.empty(); }
+    [[nodiscard]] bool Contains(double v) const { return v >= edges_.front() && v <= edges_.back(); }
+    // Inner edges (all but the first and last) <= v, resp. < v; v within the edges.
+    [[nodiscard]] int InnerAtOrBelow(double v) const;
+    [[nodiscard]] int InnerBelow(double v) const;
+
+   private:
+    [[nodiscard]] int Start(double v) const;
+    std::vector<double> edges_;
+    std::vector<int> start_;  // per bucket: inner edges below its lower end
+    double inverse_bucket_ = 0.0;
+  };
+  // Tangents of the column edges (left to right) and of the row edges (bottom to top); empty
+  // when a FOV reaches 180 degrees (BeamOf then uses the angles).
+  Edges tan_col_edges_;
+  Edges tan_row_edges_;
 };
 
 enum class BeamRepresentation { kDense, kUnrolledLinkedList };
