@@ -103,13 +103,13 @@ class RayTracer {
 
   double Trace(std::size_t beam, const Eigen::Vector3d& origin, const Eigen::Vector3d& dir,
                double t_start, double t_end, float weight_scale, std::vector<Segment>* out) {
+    if (!(t_end > t_start)) return t_start;
     // Voxels beyond the cell where the remaining first-hit mass falls below tail_mass are
-    // never reached: the loop below stops there. Tracing only that far saves the traversal and
-    // the interval lookups of a whole chunk behind every surface.
-    // (The voxel holding that cell is still crossed whole.)
+    // never reached: the loop below stops there. Entering no voxel past that cell saves the
+    // traversal and the interval lookups of a whole chunk behind every surface; the voxel
+    // holding the cell is still crossed whole.
     const double t_last_entry =
         std::min(t_end, grid_.InformationEndM(beam, t_start, options_.tail_mass) + cell_m_);
-    if (!(t_end > t_start)) return t_start;
     const double res = options_.resolution_m;
     const Eigen::Vector3d p0 = origin + dir * t_start;
     long index[3];

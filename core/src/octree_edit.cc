@@ -7,22 +7,19 @@ bool DeleteVoxel(octomap::OcTree& tree, const octomap::OcTreeKey& key) {
   const unsigned depth = tree.getTreeDepth();
   octomap::OcTreeNode* node = tree.getRoot();
   if (node == nullptr || depth > kMaxDepth) return false;
-  // First pass: is the key held at all (leaf or pruned node)? Nothing changes if not.
+  // The path to the leaf. Where the key's branch ends, a node without children is a pruned
+  // block holding the key: split it (its children are leaves again, so the descent goes on
+  // down to the key). A node with other children but none towards the key does not hold it;
+  // that can only happen before the first split, so nothing has changed then.
+  octomap::OcTreeNode* path[kMaxDepth + 1];
+  unsigned index[kMaxDepth + 1];
+  path[0] = node;
   for (unsigned d = 0; d < depth; ++d) {
     const unsigned child = octomap::computeChildIdx(key, static_cast<int>(depth - 1 - d));
     if (!tree.nodeChildExists(node, child)) {
-      if (tree.nodeHasChildren(node)) return false;  // no branch towards the key
-      break;                                         // a pruned node holds it
+      if (tree.nodeHasChildren(node)) return false;
+      tree.expandNode(node);
     }
-    node = tree.getNodeChild(node, child);
-  }
-  // Second pass: the path to the leaf, splitting pruned nodes on the way.
-  octomap::OcTreeNode* path[kMaxDepth + 1];
-  unsigned index[kMaxDepth + 1];
-  path[0] = node = tree.getRoot();
-  for (unsigned d = 0; d < depth; ++d) {
-    const unsigned child = octomap::computeChildIdx(key, static_cast<int>(depth - 1 - d));
-    if (!tree.nodeChildExists(node, child)) tree.expandNode(node);
     index[d + 1] = child;
     node = tree.getNodeChild(node, child);
     path[d + 1] = node;
