@@ -188,6 +188,24 @@ std::uint32_t DenseBeam::TailDropCell(const BeamContext& ctx, std::uint32_t from
   return static_cast<std::uint32_t>(start + 1);  // fraction >= 1
 }
 
+BeamProfileCells DenseBeam::Profile(const BeamContext& ctx, std::uint32_t from,
+                                    double tail_fraction, double free_ratio) const {
+  const std::size_t n = ctx.cell_count();
+  const std::size_t start = std::min<std::size_t>(from, n);
+  std::vector<double> tail(n + 1);  // S(c), c in [0, N]
+  double acc = p_[n];
+  tail[n] = acc;
+  for (std::size_t i = n; i-- > 0;) tail[i] = acc += p_[i];
+  BeamProfileCells out;
+  out.info_end = TailDropCell(ctx, from, tail_fraction);
+  const double no_information = kNoInformationTail * tail[0];
+  std::size_t c = start;
+  while (c < n && tail[c] > no_information && p_[c] <= free_ratio * ctx.prior() * tail[c]) ++c;
+  out.mass_begin = static_cast<std::uint32_t>(c < n ? c : n + 1);
+  out.free_hazard = tail[start] > 0.0 && c > start ? -std::log(tail[c] / tail[start]) : 0.0;
+  return out;
+}
+
 std::size_t DenseBeam::MemoryBytes() const {
   return sizeof(*this) + p_.capacity() * sizeof(double);
 }
@@ -417,6 +435,116 @@ std::uint32_t UllBeam::TailDropCell(const BeamContext& ctx, std::uint32_t from,
   return static_cast<std::uint32_t>(start + 1);  // fraction >= 1
 }
 
+BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from,
+                                  double tail_fraction, double free_ratio) const {
+  const std::size_t n = ctx.cell_count();
+  const std::size_t start = std::min<std::size_t>(from, n);
+  // S at the start of every composite (s_at[k]), and after the last one (B_{N+1} alone). The
+  // usual beam has one EC: its sum is the running total less the closed-form rest, unless that
+  // would cancel (a small EC next to large runs), so the profile costs a few cells of it only.
+  constexpr std::size_t kLocal = 32;
+  double s_local[kLocal + 1];
+  thread_local std::vector<double> s_heap;
+  double* s_at = s_local;
+  if (list_.size() + 1 > kLocal + 1) {
+    s_heap.resize(list_.size() + 1);
+    s_at = s_heap.data();
+  }
+  double closed = w_all_free_;
+  std::size_t ecs = 0;
+  for (const Composite& c : list_) {
+    if (c.exploded == 0) {
+      closed += c.w_first * ctx.GeomSum(c.count);
+    } else {
+      ++ecs;
+    }
+  }
+  const double derived_ec = total_ - closed;
+  const bool derive = ecs == 1 && derived_ec > 1e-6 * total_;
+  double acc = w_all_free_;
+  s_at[list_.size()] = acc;
+  for (std::size_t k = list_.size(); k-- > 0;) {
+    const Composite& c = list_[k];
+    s_at[k] = acc += (c.exploded != 0 && derive) ? derived_ec : CompositeSum(ctx, c);
+  }
+  const double no_information = kNoInformationTail * s_at[0];
+  BeamProfileCells out;
+  out.mass_begin = static_cast<std::uint32_t>(n + 1);
+  const double ratio = free_ratio * ctx.prior();
+  double s_start = -1.0;       // S(start)
+  double s_end = w_all_free_;  // S where the free zone ends
+  bool found = false;
+  for (std::size_t k = 0; k < list_.size() && !found; ++k) {
+    const Composite& c = list_[k];
+    const std::size_t c_end = std::size_t{c.first} + c.count;
+    if (c_end <= start) continue;
+    const std::size_t j0 = std::max<std::size_t>(c.first, start);
+    if (c.exploded == 0) {
+      const double w = c.w_first * ctx.RhoPow(j0 - c.first);
+      const double s = s_at[k + 1] + w * ctx.GeomSum(c_end - j0);
+      if (s_start < 0.0) s_start = s;
+      if (s <= no_information || w > ratio * s) {
+        out.mass_begin = static_cast<std::uint32_t>(j0);
+        s_end = s;
+        found = true;
+      }
+      continue;  // below p0 the run's p(m) only falls: no cell of it reaches the ratio
+    }
+    double s = s_at[k];
+    for (std::size_t t = 0; t < j0 - c.first; ++t) s -= pool_[c.pool_begin + t];
+    for (std::size_t j = j0; j < c_end; ++j) {
+      if (s_start < 0.0) s_start = s;
+      const double w = pool_[c.pool_begin + (j - c.first)];
+      if (s <= no_information || w > ratio * s) {
+        out.mass_begin = static_cast<std::uint32_t>(j);
+        s_end = s;
+        found = true;
+        break;
+      }
+      s -= w;
+    }
+  }
+  if (s_start < 0.0) s_start = w_all_free_;  // start == N
+  out.free_hazard =
+      s_start > 0.0 && out.mass_begin > start ? -std::log(std::max(s_end, 0.0) / s_start) : 0.0;
+  if (!std::isfinite(out.free_hazard)) out.free_hazard = 0.0;
+  // Information end (TailDropCell): the composite where S falls below the threshold, then the
+  // cell inside it.
+  const double threshold = tail_fraction * s_start;
+  out.info_end = static_cast<std::uint32_t>(n + 1);
+  if (!(w_all_free_ >= threshold)) {
+    std::size_t k = list_.size();
+    while (k > 0 && s_at[k - 1] < threshold) --k;
+    std::size_t cell = start + 1;  // S(start) itself is below: fraction > 1
+    if (k > 0) {
+      const Composite& c = list_[k - 1];
+      const std::size_t c_end = std::size_t{c.first} + c.count;
+      if (c.exploded == 0) {
+        // S(x) = s_at[k] + w_first rho^(x - first) GeomSum(c_end - x) falls with x: the largest
+        // x with S(x) >= threshold, by bisection ([lo] holds, (hi] does not).
+        std::size_t lo = c.first, hi = c_end;
+        while (hi - lo > 1) {
+          const std::size_t mid = lo + (hi - lo) / 2;
+          const double s_mid =
+              s_at[k] + c.w_first * ctx.RhoPow(mid - c.first) * ctx.GeomSum(c_end - mid);
+          (s_mid >= threshold ? lo : hi) = mid;
+        }
+        cell = lo + 1;
+      } else {
+        double tail = s_at[k];
+        std::size_t t = c.count;
+        while (t > 0) {
+          tail += pool_[c.pool_begin + --t];
+          if (tail >= threshold) break;
+        }
+        cell = c.first + t + 1;
+      }
+    }
+    out.info_end = static_cast<std::uint32_t>(std::max(cell, start + 1));
+  }
+  return out;
+}
+
 void UllBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
                          std::vector<double>* out) const {
   out->assign(cells.size(), 0.0);
@@ -534,6 +662,10 @@ class BeamStoreOf final : public BeamStore {
   std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,
                              double fraction) const override {
     return beams_[beam].TailDropCell(*ctx_, from, fraction);
+  }
+  BeamProfileCells Profile(std::size_t beam, std::uint32_t from, double tail_fraction,
+                           double free_ratio) const override {
+    return beams_[beam].Profile(*ctx_, from, tail_fraction, free_ratio);
   }
   bool Touched(std::size_t beam) const override { return beams_[beam].touched(); }
   void Reset() override {

@@ -106,6 +106,16 @@ std::optional<std::size_t> BeamTessellation::BeamOf(const Eigen::Vector3d& p_sen
          static_cast<std::size_t>(col);
 }
 
+int BeamTessellation::ColumnOfTangent(double tan_azimuth) const {
+  const double v = std::clamp(tan_azimuth, tan_col_edges_.lo(), tan_col_edges_.hi());
+  return tan_col_edges_.InnerAtOrBelow(v);
+}
+
+int BeamTessellation::RowOfTangent(double tan_elevation) const {
+  const double v = std::clamp(tan_elevation, tan_row_edges_.lo(), tan_row_edges_.hi());
+  return (rows_ - 1) - tan_row_edges_.InnerBelow(v);
+}
+
 std::optional<std::size_t> BeamTessellation::BeamOfByAngles(const Eigen::Vector3d& p_sensor) const {
   const double x = p_sensor.x();
   const double y = p_sensor.y();
@@ -331,6 +341,30 @@ double BeamGrid::InformationEndM(std::size_t beam, double from_m, double fractio
       impl_->store->TailDropCell(beam, static_cast<std::uint32_t>(from), fraction);
   if (c > n) return std::numeric_limits<double>::infinity();
   return static_cast<double>(c) * cell;
+}
+
+BeamProfile BeamGrid::Profile(std::size_t beam, double from_m, double tail_fraction,
+                              double free_ratio) const {
+  impl_->CheckBeam(beam);
+  const std::size_t n = cells_per_beam();
+  const double cell = impl_->options.cell_size_m;
+  double from = std::round(from_m / cell);
+  if (!(from >= 0.0)) from = 0.0;
+  from = std::min(from, static_cast<double>(n));
+  const auto start = static_cast<std::uint32_t>(from);
+  const BeamProfileCells cells = impl_->store->Profile(beam, start, tail_fraction, free_ratio);
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  BeamProfile out;
+  out.mass_begin_m = cells.mass_begin > n ? kInf : cells.mass_begin * cell;
+  out.info_end_m = cells.info_end > n ? kInf : cells.info_end * cell;
+  const std::size_t end = std::min<std::size_t>(cells.mass_begin, n);
+  if (end <= start) {
+    out.free_log_odds = -kInf;
+  } else {
+    const double prior_hazard = -std::log1p(-impl_->context->prior()) * double(end - start);
+    out.free_log_odds = std::log(std::max(cells.free_hazard, 1e-300) / prior_hazard);
+  }
+  return out;
 }
 
 double BeamGrid::PriorOccupancy(double length_m) const {

@@ -67,4 +67,32 @@ double FuseAll(FusionRule rule, const std::vector<double>& probabilities) {
   return fused;
 }
 
+FusionPolicy FusionPolicy::Make(FusionRule rule, double clamping_min_probability,
+                                double clamping_max_probability) {
+  FusionPolicy policy;
+  policy.rule = rule;
+  policy.clamp_min_log_odds = static_cast<float>(LogOdds(clamping_min_probability));
+  policy.clamp_max_log_odds = static_cast<float>(LogOdds(clamping_max_probability));
+  return policy;
+}
+
+float FusionPolicy::Fuse(const float* log_odds, std::size_t n) const {
+  double fused = log_odds[0];
+  switch (rule) {
+    case FusionRule::kIndependentOpinionPool:  // Eq. 16: log-odds add
+      for (std::size_t i = 1; i < n; ++i) fused += log_odds[i];
+      break;
+    case FusionRule::kMax:
+      for (std::size_t i = 1; i < n; ++i) fused = std::max<double>(fused, log_odds[i]);
+      break;
+    case FusionRule::kDeMorgan: {
+      double free = 1.0;
+      for (std::size_t i = 0; i < n; ++i) free *= 1.0 - ProbabilityFromLogOdds(log_odds[i]);
+      fused = LogOdds(std::clamp(1.0 - free, 1e-12, 1.0 - 1e-12));
+      break;
+    }
+  }
+  return std::clamp(static_cast<float>(fused), clamp_min_log_odds, clamp_max_log_odds);
+}
+
 }  // namespace fusion

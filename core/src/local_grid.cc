@@ -1,5 +1,7 @@
 #include "fusion/core/local_grid.h"
 
+#include "beam_trace.h"
+
 #include <algorithm>
 #include <cmath>
 #include <exception>
@@ -11,14 +13,6 @@ namespace fusion {
 namespace {
 
 constexpr int kTreeMaxVal = 32768;  // octomap tree_max_val for depth 16
-constexpr std::size_t kChunkSegments = 256;
-constexpr std::size_t kRowsPerBlock = 4;
-constexpr double kProbabilityFloor = 1e-9;
-
-double Logit(double p) {
-  p = std::clamp(p, kProbabilityFloor, 1.0 - kProbabilityFloor);
-  return std::log(p / (1.0 - p));
-}
 
 // Slot of a key: the 4 x 4 x 4 brick around the voxel is hashed (murmur3
 // finaliser) and the voxel's position inside the brick is added, so
@@ -58,135 +52,6 @@ class Probe {
   std::size_t step_ = 0;
 };
 
-// One voxel crossing of a ray with its evidence.
-struct Segment {
-  octomap::OcTreeKey key;
-  float evidence;
-  float weight;
-  double t_out_m;  // range where the ray leaves the voxel
-};
-
-// Prior log-odds of an interval of n beam cells, cached by n.
-class PriorCache {
- public:
-  PriorCache(const BeamGrid& grid) : grid_(grid), cell_m_(grid.options().cell_size_m) {}
-  double LogOddsOfCells(long n) {
-    if (n < 0) n = 0;
-    const auto index = static_cast<std::size_t>(n);
-    if (index >= cache_.size()) {
-      cache_.resize(index + 1, std::numeric_limits<double>::quiet_NaN());
-    }
-    double& v = cache_[index];
-    if (std::isnan(v)) v = Logit(grid_.PriorOccupancy(static_cast<double>(n) * cell_m_));
-    return v;
-  }
-
- private:
-  const BeamGrid& grid_;
-  double cell_m_;
-  std::vector<double> cache_;
-};
-
-// Traces one ray of one beam (Amanatides & Woo voxel traversal) and appends its
-// segments. Returns the range at which the trace stopped.
-class RayTracer {
- public:
-  RayTracer(const BeamGrid& grid, const RenderOptions& options)
-      : grid_(grid),
-        options_(options),
-        prior_(grid),
-        cell_m_(grid.options().cell_size_m),
-        inv_res_(1.0 / options.resolution_m) {
-    boundaries_.reserve(kChunkSegments + 1);
-    keys_.reserve(kChunkSegments);
-  }
-
-  double Trace(std::size_t beam, const Eigen::Vector3d& origin, const Eigen::Vector3d& dir,
-               double t_start, double t_end, float weight_scale, std::vector<Segment>* out) {
-    if (!(t_end > t_start)) return t_start;
-    // Voxels beyond the cell where the remaining first-hit mass falls below tail_mass are
-    // never reached: the loop below stops there. Entering no voxel past that cell saves the
-    // traversal and the interval lookups of a whole chunk behind every surface; the voxel
-    // holding the cell is still crossed whole.
-    const double t_last_entry =
-        std::min(t_end, grid_.InformationEndM(beam, t_start, options_.tail_mass) + cell_m_);
-    const double res = options_.resolution_m;
-    const Eigen::Vector3d p0 = origin + dir * t_start;
-    long index[3];
-    int step[3];
-    double t_max[3];
-    double t_delta[3];
-    for (int a = 0; a < 3; ++a) {
-      index[a] = static_cast<long>(std::floor(p0[a] * inv_res_));
-      if (dir[a] > 0.0) {
-        step[a] = 1;
-        t_max[a] = t_start + ((index[a] + 1) * res - p0[a]) / dir[a];
-        t_delta[a] = res / dir[a];
-      } else if (dir[a] < 0.0) {
-        step[a] = -1;
-        t_max[a] = t_start + (index[a] * res - p0[a]) / dir[a];
-        t_delta[a] = -res / dir[a];
-      } else {
-        step[a] = 0;
-        t_max[a] = std::numeric_limits<double>::infinity();
-        t_delta[a] = std::numeric_limits<double>::infinity();
-      }
-    }
-    double remaining_mass = 1.0;
-    double t_in = t_start;
-    bool done = false;
-    while (!done) {
-      boundaries_.clear();
-      keys_.clear();
-      boundaries_.push_back(t_in);
-      while (keys_.size() < kChunkSegments && t_in < t_last_entry) {
-        const int axis =
-            (t_max[0] < t_max[1]) ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
-        const double t_out = std::min(t_max[axis], t_end);
-        keys_.emplace_back(static_cast<octomap::key_type>(index[0] + kTreeMaxVal),
-                           static_cast<octomap::key_type>(index[1] + kTreeMaxVal),
-                           static_cast<octomap::key_type>(index[2] + kTreeMaxVal));
-        boundaries_.push_back(t_out);
-        t_in = t_out;
-        index[axis] += step[axis];
-        t_max[axis] += t_delta[axis];
-      }
-      if (keys_.empty()) break;
-      grid_.IntervalOccupancy(beam, boundaries_, &occupancy_);
-      long c1 = std::lround(boundaries_[0] / cell_m_);
-      for (std::size_t j = 0; j < keys_.size(); ++j) {
-        const long c0 = c1;
-        c1 = std::lround(boundaries_[j + 1] / cell_m_);
-        if (c1 <= c0) continue;  // shorter than a beam cell: no evidence of its own
-        const double p = j < occupancy_.size() ? occupancy_[j] : 0.5;
-        double evidence = Logit(p) - prior_.LogOddsOfCells(c1 - c0);
-        evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);
-        const double length_m = boundaries_[j + 1] - boundaries_[j];
-        out->push_back({keys_[j], static_cast<float>(evidence),
-                        static_cast<float>(length_m) * weight_scale, boundaries_[j + 1]});
-        remaining_mass *= (1.0 - p);
-        if (remaining_mass < options_.tail_mass) {
-          done = true;
-          t_in = boundaries_[j + 1];
-          break;
-        }
-      }
-      if (t_in >= t_last_entry) done = true;
-    }
-    return t_in;
-  }
-
- private:
-  const BeamGrid& grid_;
-  const RenderOptions& options_;
-  PriorCache prior_;
-  double cell_m_;
-  double inv_res_;
-  std::vector<double> boundaries_;
-  std::vector<octomap::OcTreeKey> keys_;
-  std::vector<double> occupancy_;
-};
-
 }  // namespace
 
 octomap::OcTreeKey KeyOfPoint(const Eigen::Vector3d& p_world, double resolution_m) {
@@ -214,6 +79,10 @@ void LocalGrid::Clear() {
   std::fill(entries_.begin(), entries_.end(), Entry{});
   size_ = 0;
   last_ = 0;
+}
+
+void LocalGrid::Reserve(std::size_t voxels) {
+  while (2 * voxels > entries_.size()) Grow();
 }
 
 void LocalGrid::Grow() {
@@ -318,105 +187,36 @@ std::vector<std::pair<octomap::OcTreeKey, float>> LocalGrid::LogOddsVoxels() con
   return out;
 }
 
-namespace {
-
-// Renders the beams of `rows` (row-major beam order) into `local`.
-void RenderRows(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-                const RenderOptions& options, const std::vector<std::size_t>& rows,
-                LocalGrid& local, RenderStats& s) {
-  const SensorSpec& spec = grid.spec();
-  const BeamTessellation& tess = grid.tessellation();
-  const double beam_length_m =
-      static_cast<double>(grid.cells_per_beam()) * grid.options().cell_size_m;
-  const double t_start = std::max(0.0, spec.r_min_m);
-  const double t_end = std::min(beam_length_m, options.max_range_m);
-  const double width_rad = std::max(tess.beam_width_h_rad(), tess.beam_width_v_rad());
-  const Eigen::Matrix3d R = T_world_sensor.linear();
-  const Eigen::Vector3d origin = T_world_sensor.translation();
-
-  RayTracer tracer(grid, options);
-  std::vector<Segment> segments;
-  segments.reserve(512);
-  const auto cols = static_cast<std::size_t>(tess.cols());
-  for (const std::size_t row : rows) {
-    for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
-      if (!grid.Touched(b)) {
-        ++s.beams_untouched;
-        continue;
-      }
-      ++s.beams_rendered;
-      segments.clear();
-      const Eigen::Vector3d dir_sensor = tess.Direction(b);
-      const double t_stop =
-          tracer.Trace(b, origin, R * dir_sensor, t_start, t_end, 1.0f, &segments);
-      ++s.rays_traced;
-      const int k =
-          std::clamp(static_cast<int>(std::ceil(width_rad * t_stop / options.resolution_m)), 1,
-                     std::max(1, options.max_subrays_per_axis));
-      if (k > 1) {
-        // The beam's footprint outgrows a voxel at r_split = resolution / width:
-        // keep the centre ray up to there and spread k x k sub-rays uniformly
-        // over its azimuth x elevation sector beyond, each with weight 1 / k^2.
-        const double r_split = options.resolution_m / width_rad;
-        double t_sub = t_start;
-        std::size_t keep = 0;
-        while (keep < segments.size() && segments[keep].t_out_m <= r_split) {
-          t_sub = segments[keep].t_out_m;
-          ++keep;
-        }
-        segments.resize(keep);
-        const double az = std::atan2(dir_sensor.x(), dir_sensor.z());
-        const double el = std::atan2(-dir_sensor.y(), std::hypot(dir_sensor.x(), dir_sensor.z()));
-        const float weight = 1.0f / static_cast<float>(k * k);
-        for (int i = 0; i < k; ++i) {
-          const double sub_az = az + ((i + 0.5) / k - 0.5) * tess.beam_width_h_rad();
-          for (int j = 0; j < k; ++j) {
-            const double sub_el = el + ((j + 0.5) / k - 0.5) * tess.beam_width_v_rad();
-            const Eigen::Vector3d d(std::cos(sub_el) * std::sin(sub_az), -std::sin(sub_el),
-                                    std::cos(sub_el) * std::cos(sub_az));
-            tracer.Trace(b, origin, R * d, t_sub, t_end, weight, &segments);
-            ++s.rays_traced;
-          }
-        }
-      }
-      s.segments += segments.size();
-      for (const Segment& seg : segments) local.AddEvidence(seg.key, seg.evidence, seg.weight);
-    }
-  }
-}
-
-}  // namespace
-
 LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                          const RenderOptions& options, RenderStats* stats) {
   const auto rows = static_cast<std::size_t>(grid.tessellation().rows());
-  std::size_t threads =
-      options.threads != 0 ? options.threads : std::max(1u, std::thread::hardware_concurrency());
-  threads = std::clamp<std::size_t>(threads, 1, std::max<std::size_t>(1, rows / kRowsPerBlock));
-  // Blocks of rows dealt out in turn, so that every thread gets its share of the beams that
-  // see far (long rays) and of those that hit something near.
-  std::vector<std::vector<std::size_t>> rows_of(threads);
-  for (std::size_t r = 0; r < rows; ++r) rows_of[(r / kRowsPerBlock) % threads].push_back(r);
-  std::vector<LocalGrid> parts(threads, LocalGrid(options.resolution_m, options.combine));
-  std::vector<RenderStats> part_stats(threads);
-  std::vector<std::exception_ptr> errors(threads);
-  const auto work = [&](std::size_t t) {
-    try {
-      RenderRows(grid, T_world_sensor, options, rows_of[t], parts[t], part_stats[t]);
-    } catch (...) {
-      errors[t] = std::current_exception();
-    }
-  };
-  std::vector<std::thread> helpers;
-  for (std::size_t t = 1; t < threads; ++t) helpers.emplace_back(work, t);
-  work(0);
-  for (std::thread& h : helpers) h.join();
-  for (const auto& e : errors) {
-    if (e) std::rethrow_exception(e);
-  }
+  const auto cols = static_cast<std::size_t>(grid.tessellation().cols());
+  const std::size_t workers = detail::RowWorkers(rows, options.threads);
+  std::vector<LocalGrid> parts(workers, LocalGrid(options.resolution_m, options.combine));
+  std::vector<RenderStats> part_stats(workers);
+  detail::ForEachRowBlock(
+      rows, workers, [&](std::size_t t, const std::vector<std::size_t>& my_rows) {
+        detail::BeamTracer tracer(grid, T_world_sensor, options);
+        std::vector<detail::Segment> segments;
+        segments.reserve(512);
+        RenderStats& s = part_stats[t];
+        for (const std::size_t row : my_rows) {
+          for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
+            if (!grid.Touched(b)) {
+              ++s.beams_untouched;
+              continue;
+            }
+            ++s.beams_rendered;
+            segments.clear();
+            s.rays_traced += tracer.TraceBeam(b, tracer.t_start(), &segments);
+            s.segments += segments.size();
+            for (const auto& seg : segments) parts[t].AddEvidence(seg.key, seg.evidence, seg.weight);
+          }
+        }
+      });
   LocalGrid local = std::move(parts[0]);
   RenderStats s = part_stats[0];
-  for (std::size_t t = 1; t < threads; ++t) {
+  for (std::size_t t = 1; t < workers; ++t) {
     local.Merge(parts[t]);
     s.beams_rendered += part_stats[t].beams_rendered;
     s.beams_untouched += part_stats[t].beams_untouched;

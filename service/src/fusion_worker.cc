@@ -9,233 +9,346 @@
 #include <cerrno>
 #include <cstring>
 
-#include "fusion/core/octree_edit.h"
+#include "fusion/core/projective_render.h"
 
 namespace fusion::service {
+
+// A sensor's way through the worker. Lock order: map_mutex_, then Lane::mutex, then work_mutex_.
+struct FusionWorker::Lane {
+  const SensorSetup* setup = nullptr;
+  SensorCountersAtomic* counters = nullptr;
+  mutable std::mutex mutex;  // guards periods (the integrator, a render of the open period)
+  std::unique_ptr<SensorPeriods> periods;
+  // Guarded by work_mutex_.
+  std::size_t sealed_waiting = 0;  // sealed periods not yet committed
+  bool dirty = false;              // the open period has frames its last render did not see
+  // The renderer's own (under map_mutex_).
+  std::uint64_t live_sequence = 0;  // the period the map's live contribution renders
+  std::uint64_t live_frames = 0;    // and how many of its frames
+  std::uint64_t committed_clouds = 0;
+  std::chrono::steady_clock::time_point last_open_render{};
+};
+
 namespace {
 
-// Above this many changed voxels a render updates the published map's inner nodes in one pass.
-constexpr std::size_t kLazyUpdateKeys = 4096;
+void LowerPriority(int nice, const char* what) {
+  // Queries come first: the worker's threads (and the render threads they start, which inherit
+  // this) run at a lower priority than the gRPC and DDS threads. Linux keeps a nice value per
+  // thread.
+  if (nice > 0 &&
+      setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), nice) != 0) {
+    spdlog::warn("worker: could not lower the priority of the {}: {}", what, std::strerror(errno));
+  }
+}
 
 }  // namespace
 
 FusionWorker::FusionWorker(WorkerOptions options, std::vector<SensorSetup> sensors,
                            IngestQueues* queues, SnapshotHub* hub)
-    : options_(std::move(options)), sensors_(std::move(sensors)), queues_(queues), hub_(hub) {}
+    : options_(std::move(options)),
+      render_options_(MapRenderOptions(options_.map)),
+      sensors_(std::move(sensors)),
+      queues_(queues),
+      hub_(hub) {}
 
 FusionWorker::~FusionWorker() { Stop(); }
 
-bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> base, std::string* error) {
+bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> history, std::string* error) {
   std::lock_guard<std::mutex> lock(map_mutex_);
-  base_ = std::move(base);
-  RebuildMapLocked();
+  WorldMapOptions map_options = options_.map;
+  map_options.occupancy_threshold = options_.thresholds.occupied;
+  map_ = std::make_unique<WorldMap>(map_options);
   for (const auto& sensor : sensors_) {
     const MapStatus status = map_->AddSensor(sensor.id, sensor.spec);
     if (status != MapStatus::kOk) {
       *error = "sensor '" + sensor.id + "': " + MapStatusName(status);
       return false;
     }
+    auto lane = std::make_unique<Lane>();
+    lane->setup = &sensor;
+    lane->counters = queues_->counters(sensor.id);
+    lane->periods = std::make_unique<SensorPeriods>(sensor.spec, SensorGridOptions(options_.map),
+                                                    options_.map.pose_tolerance_m,
+                                                    options_.map.pose_tolerance_rad);
+    lanes_.push_back(std::move(lane));
   }
-  if (base_) {
-    version_offset_ = 1;
-    PublishLocked({}, /*reset=*/true);
-  }
-  thread_ = std::thread([this] { Loop(); });
+  if (history) map_->LoadHistory(*history);
+  PublishLocked();
+  integrator_ = std::thread([this] { IntegratorLoop(); });
+  renderer_ = std::thread([this] { RendererLoop(); });
   return true;
 }
 
 void FusionWorker::Stop() {
-  if (!thread_.joinable()) return;
-  stop_ = true;
+  if (!integrator_.joinable()) return;
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    stop_ = true;
+  }
+  room_cv_.notify_all();
   queues_->Wake();
-  thread_.join();
-}
-
-void FusionWorker::RebuildMapLocked() {
-  map_ = std::make_unique<WorldMap>(options_.map);
-  RebuildPublishedLocked();
-  rendered_map_version_ = 0;
-  dirty_ = false;
-}
-
-void FusionWorker::Loop() {
-  // Queries come first: the worker (and the render threads it starts, which inherit this) runs
-  // at a lower priority than the gRPC and DDS threads, so a render never holds a query back
-  // for a whole time slice on a busy machine. Linux keeps a nice value per thread.
-  if (options_.nice > 0 &&
-      setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), options_.nice) != 0) {
-    spdlog::warn("worker: could not lower its priority: {}", std::strerror(errno));
+  integrator_.join();
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    integrator_done_ = true;
   }
-  using Clock = std::chrono::steady_clock;
-  auto last_render = Clock::now();
+  work_cv_.notify_all();
+  renderer_.join();
+}
+
+FusionWorker::Lane* FusionWorker::LaneOf(const std::string& sensor_id) const {
+  for (const auto& lane : lanes_) {
+    if (lane->setup->id == sensor_id) return lane.get();
+  }
+  return nullptr;
+}
+
+// ---- integrator -------------------------------------------------------------------------------
+
+void FusionWorker::IntegratorLoop() {
+  LowerPriority(options_.nice, "integrator");
   std::vector<Cloud> clouds;
-  const auto step = [&](Clock::time_point until) {
-    clouds.clear();
-    queues_->PopAll(&clouds, until);
-    std::lock_guard<std::mutex> lock(map_mutex_);
-    for (const Cloud& cloud : clouds) IntegrateLocked(cloud);
-    const auto now = Clock::now();
-    if (dirty_ && (now - last_render >= options_.render_interval || stop_)) {
-      // The cadence counts from the start of a render: a render that takes most of the
-      // interval is followed by the next one as soon as the interval is over.
-      last_render = now;
-      RenderAndPublishLocked();
-    }
-  };
   while (!stop_) {
-    bool dirty = false;
-    {
-      std::lock_guard<std::mutex> lock(map_mutex_);
-      dirty = dirty_;
-    }
-    step(dirty ? last_render + options_.render_interval
-               : Clock::now() + std::chrono::milliseconds(500));
+    clouds.clear();
+    queues_->PopAll(&clouds, std::chrono::steady_clock::now() + std::chrono::milliseconds(500));
+    for (const Cloud& cloud : clouds) Integrate(cloud);
   }
-  step(Clock::now());  // drain what is left, render and publish
+  do {  // what is still queued
+    clouds.clear();
+    queues_->PopAll(&clouds, std::chrono::steady_clock::now());
+    for (const Cloud& cloud : clouds) Integrate(cloud);
+  } while (!clouds.empty());
 }
 
-void FusionWorker::IntegrateLocked(const Cloud& cloud) {
-  auto* counters = queues_->counters(cloud.sensor_id);
-  const SensorSetup* setup = nullptr;
-  for (const auto& s : sensors_) {
-    if (s.id == cloud.sensor_id) setup = &s;
+void FusionWorker::Integrate(const Cloud& cloud) {
+  Lane* lane = LaneOf(cloud.sensor_id);
+  if (lane == nullptr || lane->counters == nullptr) return;
+  const Eigen::Isometry3d T_world_sensor =
+      cloud.T_world_published * lane->setup->T_published_sensor;
+  bool may_seal = true;
+  {
+    std::unique_lock<std::mutex> lock(work_mutex_);
+    if (options_.wait_for_renderer) {
+      room_cv_.wait(lock, [&] { return lane->sealed_waiting < kMaxSealedPeriods || stop_; });
+    }
+    may_seal = lane->sealed_waiting < kMaxSealedPeriods;
   }
-  if (counters == nullptr || setup == nullptr) return;
-  const Eigen::Isometry3d T_world_sensor = cloud.T_world_published * setup->T_published_sensor;
-  IntegrationStats stats;
+  PeriodIntegration result;
+  std::unique_ptr<Period> sealed;
   MapStatus status = MapStatus::kInvalidArgument;
-  try {
-    status = map_->Integrate(cloud.sensor_id, T_world_sensor, cloud.xyz.data(),
-                             cloud.xyz.size() / 3, cloud.beyond_range, &stats);
-  } catch (const std::exception& e) {
-    spdlog::error("worker: cloud {} of '{}' failed: {}", cloud.sequence_number, cloud.sensor_id,
-                  e.what());
-    return;
+  {
+    std::lock_guard<std::mutex> lock(lane->mutex);
+    try {
+      status = lane->periods->Integrate(T_world_sensor, cloud.xyz.data(), cloud.xyz.size() / 3,
+                                        cloud.beyond_range, may_seal, &result, &sealed);
+    } catch (const std::exception& e) {
+      spdlog::error("worker: cloud {} of '{}' failed: {}", cloud.sequence_number,
+                    cloud.sensor_id, e.what());
+      return;
+    }
+    lane->counters->memory_bytes.store(lane->periods->MemoryBytes());
   }
   if (status != MapStatus::kOk) {
     spdlog::warn("worker: cloud {} of '{}' not integrated: {}", cloud.sequence_number,
                  cloud.sensor_id, MapStatusName(status));
     return;
   }
-  dirty_ = true;
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    if (sealed) {
+      sealed_.push_back({lane, std::move(sealed)});
+      ++lane->sealed_waiting;
+    }
+    lane->dirty = true;
+  }
+  work_cv_.notify_one();
   integrated_.fetch_add(1, std::memory_order_relaxed);
-  counters->integrated.fetch_add(1, std::memory_order_relaxed);
-  counters->points_updated.fetch_add(stats.updated, std::memory_order_relaxed);
-  counters->points_beyond_range.fetch_add(stats.beyond_range, std::memory_order_relaxed);
-  counters->points_missing.fetch_add(stats.missing, std::memory_order_relaxed);
-  counters->points_rejected.fetch_add(stats.rejected_nonfinite + stats.rejected_outside_fov,
-                                      std::memory_order_relaxed);
-  spdlog::debug("worker: cloud {} of '{}': {} updated, {} beyond range, {} missing",
-                cloud.sequence_number, cloud.sensor_id, stats.updated, stats.beyond_range,
-                stats.missing);
+  SensorCountersAtomic& c = *lane->counters;
+  c.integrated.fetch_add(1, std::memory_order_relaxed);
+  if (result.merged) c.merged.fetch_add(1, std::memory_order_relaxed);
+  c.points_updated.fetch_add(result.stats.updated, std::memory_order_relaxed);
+  c.points_beyond_range.fetch_add(result.stats.beyond_range, std::memory_order_relaxed);
+  c.points_missing.fetch_add(result.stats.missing, std::memory_order_relaxed);
+  c.points_rejected.fetch_add(result.stats.rejected_nonfinite + result.stats.rejected_outside_fov,
+                              std::memory_order_relaxed);
+  spdlog::debug("worker: cloud {} of '{}': {} updated, {} beyond range, {} missing{}",
+                cloud.sequence_number, cloud.sensor_id, result.stats.updated,
+                result.stats.beyond_range, result.stats.missing,
+                result.merged ? " (merged: the renderer is behind)" : "");
 }
 
-std::optional<float> FusionWorker::FusedLogOddsLocked(const octomap::OcTreeKey& key) const {
-  const octomap::OcTreeNode* live = map_->tree().search(key);
-  // A node at log-odds exactly 0 is a voxel whose last opinion went away: no information.
-  if (live != nullptr && live->getLogOdds() == 0.0f) live = nullptr;
-  const octomap::OcTreeNode* base = base_ ? base_->search(key) : nullptr;
-  if (live == nullptr && base == nullptr) return std::nullopt;
-  if (base == nullptr) return live->getLogOdds();
-  if (live == nullptr) return base->getLogOdds();
-  const double p = Fuse(options_.map.rule, base->getOccupancy(), live->getOccupancy());
-  const double clamped =
-      std::clamp(p, options_.map.clamping_min_probability, options_.map.clamping_max_probability);
-  return static_cast<float>(LogOdds(clamped));
-}
+// ---- renderer ---------------------------------------------------------------------------------
 
-void FusionWorker::RenderAndPublishLocked() {
-  const auto start = std::chrono::steady_clock::now();
-  try {
-    map_->RenderAll();
-  } catch (const std::exception& e) {
-    spdlog::error("worker: render failed: {}", e.what());
-    return;
-  }
-  dirty_ = false;
-  const auto rendered = std::chrono::steady_clock::now();
-  const std::uint64_t integrated = integrated_.load();
-  auto since = map_->ChangedKeysSince(rendered_map_version_);
-  std::vector<octomap::OcTreeKey> changed;
-  const bool full_refresh = !since;
-  if (since) changed = std::move(*since);
-  rendered_map_version_ = map_->version();
-  if (full_refresh) {
-    spdlog::warn("worker: change history exhausted; rebuilding the map");
-    RebuildPublishedLocked();
-  } else {
-    // Many changes (a first render, a new sensor pose): set the leaves alone and refresh the
-    // inner nodes in one pass at the end, instead of along every leaf's path.
-    const bool lazy = changed.size() > kLazyUpdateKeys;
-    for (const auto& key : changed) {
-      // Voxels that lost their information disappear from the published map.
-      if (const auto value = FusedLogOddsLocked(key)) {
-        published_->setNodeValue(key, *value, lazy);
-      } else {
-        (void)DeleteVoxel(*published_, key);
+void FusionWorker::RendererLoop() {
+  LowerPriority(options_.nice, "renderer");
+  using Clock = std::chrono::steady_clock;
+  while (true) {
+    bool did = false;
+    {
+      std::lock_guard<std::mutex> lock(map_mutex_);
+      did = RenderStep();
+    }
+    if (did) continue;
+    std::unique_lock<std::mutex> lock(work_mutex_);
+    // Nothing to do now: wait for a sealed period, new frames, the next render slot, or the end.
+    auto next = Clock::now() + std::chrono::seconds(1);
+    bool any_dirty = false;
+    for (const auto& lane : lanes_) {
+      if (!lane->dirty) continue;
+      any_dirty = true;
+      next = std::min(next, lane->last_open_render + options_.render_interval);
+    }
+    if (integrator_done_ && sealed_.empty() && !any_dirty) break;
+    if (!sealed_.empty()) continue;
+    work_cv_.wait_until(lock, next, [&] {
+      if (!sealed_.empty() || integrator_done_) return true;
+      for (const auto& lane : lanes_) {
+        if (lane->dirty && lane->sealed_waiting == 0 &&
+            Clock::now() >= lane->last_open_render + options_.render_interval) {
+          return true;
+        }
       }
-    }
-    if (lazy) {
-      published_->updateInnerOccupancy();
-      published_->prune();  // as setNodeValue would have, leaf by leaf
+      return false;
+    });
+  }
+}
+
+bool FusionWorker::RenderStep() {
+  Sealed sealed{nullptr, nullptr};
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    if (!sealed_.empty()) {
+      sealed = std::move(sealed_.front());
+      sealed_.pop_front();
     }
   }
-  for (const auto& sensor : sensors_) {
-    if (const BeamGrid* grid = map_->beam_grid(sensor.id)) {
-      queues_->counters(sensor.id)->memory_bytes.store(grid->MemoryBytes());
+  if (sealed.lane != nullptr) {
+    CommitSealed(std::move(sealed));
+    PublishLocked();
+    return true;
+  }
+  const auto now = std::chrono::steady_clock::now();
+  for (const auto& lane : lanes_) {
+    {
+      std::lock_guard<std::mutex> lock(work_mutex_);
+      const bool due = integrator_done_ || now >= lane->last_open_render + options_.render_interval;
+      if (!lane->dirty || lane->sealed_waiting > 0 || !due) continue;
+      lane->dirty = false;
+    }
+    if (RenderOpen(*lane)) {
+      PublishLocked();
+      return true;
     }
   }
-  const std::size_t changed_count = changed.size();
-  PublishLocked(std::move(changed), /*reset=*/full_refresh);
-  // Counted once published: a client that sees these numbers can query what they count.
-  in_map_.store(integrated);
+  return false;
+}
+
+void FusionWorker::CommitSealed(Sealed sealed) {
+  Lane& lane = *sealed.lane;
+  const Period& period = *sealed.period;
+  const std::string& id = lane.setup->id;
+  try {
+    // The map may hold this period's render already (made while it was open).
+    if (lane.live_sequence != period.sequence || lane.live_frames != period.frames) {
+      (void)map_->ReplaceLive(id, Render(*period.grid, period.T_world_sensor, render_options_));
+      renders_.fetch_add(1);
+    }
+    (void)map_->CommitLive(id);
+  } catch (const std::exception& e) {
+    spdlog::error("worker: period {} of '{}' not committed: {}", period.sequence, id, e.what());
+  }
+  lane.committed_clouds += period.frames;
+  lane.live_sequence = 0;
+  lane.live_frames = 0;
+  {
+    std::lock_guard<std::mutex> lock(lane.mutex);
+    lane.periods->Recycle(std::move(sealed.period));
+  }
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    --lane.sealed_waiting;
+  }
+  room_cv_.notify_all();
+}
+
+bool FusionWorker::RenderOpen(Lane& lane) {
+  RenderedGrid grid(options_.map.resolution_m);
+  std::uint64_t sequence = 0, frames = 0;
+  const auto start = std::chrono::steady_clock::now();
+  {
+    // The sensor's integration waits for this render of its own open period.
+    std::lock_guard<std::mutex> lock(lane.mutex);
+    {
+      std::lock_guard<std::mutex> work(work_mutex_);
+      if (lane.sealed_waiting > 0) return false;  // sealed meanwhile: commit that first
+    }
+    const Period& open = lane.periods->open();
+    if (open.frames == 0 || (open.sequence == lane.live_sequence && open.frames == lane.live_frames)) {
+      return false;
+    }
+    try {
+      grid = Render(*open.grid, open.T_world_sensor, render_options_);
+    } catch (const std::exception& e) {
+      spdlog::error("worker: render of '{}' failed: {}", lane.setup->id, e.what());
+      return false;
+    }
+    sequence = open.sequence;
+    frames = open.frames;
+  }
+  (void)map_->ReplaceLive(lane.setup->id, std::move(grid));
+  lane.live_sequence = sequence;
+  lane.live_frames = frames;
+  lane.last_open_render = start;
   renders_.fetch_add(1);
-  spdlog::debug(
-      "worker: rendered version {} ({} voxels changed) in {:.1f} ms ({:.1f} ms rendering and "
-      "fusing the beam grids)",
-      version_offset_ + rendered_map_version_, changed_count,
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count(),
-      std::chrono::duration<double, std::milli>(rendered - start).count());
+  return true;
 }
 
-void FusionWorker::RebuildPublishedLocked() {
-  published_ = base_ ? std::make_unique<octomap::OcTree>(*base_)
-                     : std::make_unique<octomap::OcTree>(options_.map.resolution_m);
-  published_->setOccupancyThres(options_.thresholds.occupied);
-  const octomap::OcTree& live = map_->tree();
-  for (auto it = live.begin_leafs(), end = live.end_leafs(); it != end; ++it) {
-    // WorldMap keeps its leaves at full depth (it never prunes).
-    if (it.getDepth() != live.getTreeDepth()) continue;
-    if (const auto value = FusedLogOddsLocked(it.getKey())) {
-      published_->setNodeValue(it.getKey(), *value);
-    }
+void FusionWorker::PublishLocked() {
+  Publication publication = map_->Publish();
+  std::uint64_t in_map = 0;
+  for (const auto& lane : lanes_) in_map += lane->committed_clouds + lane->live_frames;
+  if (publication.changes.version != published_version_) {
+    auto snapshot = std::make_shared<MapSnapshot>();
+    snapshot->version = publication.changes.version;
+    snapshot->tree = publication.tree;
+    published_version_ = snapshot->version;
+    spdlog::debug("worker: published version {} ({} regions changed)", published_version_,
+                  publication.changes.regions.size());
+    hub_->Publish(std::move(snapshot), std::move(publication.changes));
   }
-}
-
-void FusionWorker::PublishLocked(std::vector<octomap::OcTreeKey> changed, bool reset) {
-  auto snapshot = std::make_shared<MapSnapshot>();
-  snapshot->version = version_offset_ + map_->version();
-  snapshot->tree = std::make_shared<const octomap::OcTree>(*published_);
-  hub_->Publish(std::move(snapshot), std::move(changed), reset);
+  // Counted once published: a client that sees these numbers can query what they count.
+  in_map_.store(in_map);
 }
 
 std::uint64_t FusionWorker::Reset() {
   std::lock_guard<std::mutex> lock(map_mutex_);
-  version_offset_ = hub_->Current()->version + 1;
-  base_.reset();
-  RebuildMapLocked();
-  for (const auto& sensor : sensors_) (void)map_->AddSensor(sensor.id, sensor.spec);
-  PublishLocked({}, /*reset=*/true);
-  spdlog::info("map reset; version {}", version_offset_);
-  return version_offset_;
+  for (const auto& lane : lanes_) {
+    std::lock_guard<std::mutex> lane_lock(lane->mutex);
+    lane->periods->Reset();
+    lane->live_sequence = lane->live_frames = lane->committed_clouds = 0;
+  }
+  {
+    std::lock_guard<std::mutex> work(work_mutex_);
+    sealed_.clear();
+    for (const auto& lane : lanes_) {
+      lane->sealed_waiting = 0;
+      lane->dirty = false;
+    }
+  }
+  room_cv_.notify_all();
+  map_->Reset();
+  PublishLocked();
+  spdlog::info("map reset; version {}", published_version_);
+  return published_version_;
 }
 
 BeamLookup FusionWorker::InspectBeam(const std::string& sensor_id, std::optional<std::size_t> beam,
                                      std::size_t row, std::size_t col, BeamInspection* out) const {
-  std::lock_guard<std::mutex> lock(map_mutex_);
-  const BeamGrid* grid = map_->beam_grid(sensor_id);
-  if (grid == nullptr) return BeamLookup::kUnknownSensor;
-  const BeamTessellation& tess = grid->tessellation();
+  const Lane* lane = LaneOf(sensor_id);
+  if (lane == nullptr) return BeamLookup::kUnknownSensor;
+  std::lock_guard<std::mutex> lock(lane->mutex);
+  const BeamGrid& grid = *lane->periods->open().grid;
+  const BeamTessellation& tess = grid.tessellation();
   if (!beam) {
     if (row >= static_cast<std::size_t>(tess.rows()) ||
         col >= static_cast<std::size_t>(tess.cols())) {
@@ -245,11 +358,11 @@ BeamLookup FusionWorker::InspectBeam(const std::string& sensor_id, std::optional
   }
   if (*beam >= tess.beam_count()) return BeamLookup::kBeamOutOfRange;
   out->beam = *beam;
-  out->cell_size_m = grid->options().cell_size_m;
+  out->cell_size_m = grid.options().cell_size_m;
   out->direction_sensor = tess.Direction(*beam);
-  out->first_hit = grid->FirstHitProbabilities(*beam);
-  out->cell_occupancy = grid->CellProbabilities(*beam);
-  out->touched = grid->Touched(*beam);
+  out->first_hit = grid.FirstHitProbabilities(*beam);
+  out->cell_occupancy = grid.CellProbabilities(*beam);
+  out->touched = grid.Touched(*beam);
   return BeamLookup::kOk;
 }
 

@@ -8,6 +8,7 @@
 #include <mutex>
 #include <set>
 
+#include "fusion/core/octree_merge.h"
 #include "fusion/core/planes.h"
 #include "fusion/service/persistence.h"
 
@@ -186,8 +187,8 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
     }
     const octomap::OcTree& tree = *snapshot->tree;
     const std::size_t per_message = state_->config.limits().max_voxels_per_page();
-    std::vector<octomap::OcTreeKey> keys;
-    const bool full = full_next_ || !state_->hub->ChangedSince(sent_version_, &keys);
+    std::vector<MapRegion> regions;
+    const bool full = full_next_ || !state_->hub->ChangedSince(sent_version_, &regions);
     const auto new_message = [&] {
       pending_.emplace_back();
       pending_.back().set_map_version(snapshot->version);
@@ -202,10 +203,18 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
                      pending_.back().add_voxels());
       }
     } else {
-      for (const auto& key : keys) {
-        if (pending_.back().voxels_size() >= static_cast<int>(per_message)) new_message();
-        VoxelToProto(tree, key, tree.getTreeDepth(), tree.search(key), state_->thresholds,
-                     pending_.back().add_voxels());
+      // What each changed region holds now: its leaves, or the region itself (one value, or
+      // unknown where the map holds nothing any more).
+      for (const MapRegion& region : regions) {
+        ForEachInRegion(tree, region,
+                        [&](const octomap::OcTreeKey& key, unsigned depth,
+                            const octomap::OcTreeNode* node) {
+                          if (pending_.back().voxels_size() >= static_cast<int>(per_message)) {
+                            new_message();
+                          }
+                          VoxelToProto(tree, key, depth, node, state_->thresholds,
+                                       pending_.back().add_voxels());
+                        });
       }
     }
     pending_.back().set_complete(true);

@@ -1,11 +1,10 @@
 #include "fusion/service/map_snapshot.h"
 
-#include <unordered_set>
 
 namespace fusion::service {
 
-SnapshotHub::SnapshotHub(std::size_t max_logged_keys, double resolution_m)
-    : max_logged_keys_(max_logged_keys) {
+SnapshotHub::SnapshotHub(std::size_t max_logged_regions, double resolution_m)
+    : log_(max_logged_regions) {
   auto empty = std::make_shared<MapSnapshot>();
   empty->tree = std::make_shared<octomap::OcTree>(resolution_m);
   current_ = std::move(empty);
@@ -26,52 +25,22 @@ std::shared_ptr<const MapSnapshot> SnapshotHub::Current() const {
   return current_;
 }
 
-void SnapshotHub::Publish(std::shared_ptr<const MapSnapshot> snapshot,
-                          std::vector<octomap::OcTreeKey> changed, bool reset) {
-  // What the hub lets go of is destroyed after the lock is released: freeing an octree of
-  // 100 000 nodes takes milliseconds, and every query takes this lock for Current().
-  std::shared_ptr<const MapSnapshot> previous_snapshot;
-  std::deque<LogEntry> forgotten;
+void SnapshotHub::Publish(std::shared_ptr<const MapSnapshot> snapshot, MapChanges changes) {
+  // The version replaced is let go of after the lock is released: should this be its last
+  // reference, freeing an octree takes milliseconds, and every query takes this lock.
+  std::shared_ptr<const MapSnapshot> previous;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    const std::uint64_t previous = current_->version;
-    if (reset) {
-      forgotten.swap(log_);
-      logged_keys_ = 0;
-      log_start_version_ = snapshot->version;
-    } else if (log_.empty() && logged_keys_ == 0 && log_start_version_ == 0 && previous > 0) {
-      log_start_version_ = previous;  // first publish after a loaded snapshot
-    }
-    if (!reset) {
-      logged_keys_ += changed.size();
-      log_.push_back({snapshot->version, std::move(changed)});
-      while (logged_keys_ > max_logged_keys_ && !log_.empty()) {
-        logged_keys_ -= log_.front().keys.size();
-        log_start_version_ = log_.front().version;
-        forgotten.push_back(std::move(log_.front()));
-        log_.pop_front();
-      }
-    }
-    // The version replaced now stays referenced until the next Publish, so that a query that
-    // still reads it does not end up freeing it on a gRPC thread; the one before goes now.
-    previous_snapshot = std::move(retired_);
-    retired_ = std::move(current_);
+    log_.Add(std::move(changes));
+    previous = std::move(current_);
     current_ = std::move(snapshot);
   }
   Notify();
 }
 
-bool SnapshotHub::ChangedSince(std::uint64_t since, std::vector<octomap::OcTreeKey>* keys) const {
+bool SnapshotHub::ChangedSince(std::uint64_t since, std::vector<MapRegion>* regions) const {
   std::lock_guard<std::mutex> lock(mutex_);
-  if (since < log_start_version_) return false;
-  std::unordered_set<octomap::OcTreeKey, octomap::OcTreeKey::KeyHash> seen;
-  for (const auto& entry : log_) {
-    if (entry.version <= since) continue;
-    for (const auto& key : entry.keys) {
-      if (seen.insert(key).second) keys->push_back(key);
-    }
-  }
-  return true;
+  return log_.Since(since, regions);
 }
 
 int SnapshotHub::Subscribe(std::function<void()> callback) {

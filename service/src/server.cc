@@ -55,7 +55,7 @@ bool FusionServer::Start(std::string* error) {
   p.queues = std::make_unique<IngestQueues>(queue_specs);
   p.state.queues = p.queues.get();
   // Queries before the first render see an empty map at the configured resolution.
-  p.hub = std::make_unique<SnapshotHub>(SnapshotHub::kDefaultMaxLoggedKeys,
+  p.hub = std::make_unique<SnapshotHub>(SnapshotHub::kDefaultMaxLoggedRegions,
                                         config_.map().resolution_m());
   p.state.hub = p.hub.get();
 
@@ -86,6 +86,7 @@ bool FusionServer::Start(std::string* error) {
   worker_options.map = *map_options;
   worker_options.thresholds = p.state.thresholds;
   worker_options.render_interval = std::chrono::milliseconds(config_.map().render_interval_ms());
+  worker_options.wait_for_renderer = config_.ingest().reliability() == "reliable";
   p.worker =
       std::make_unique<FusionWorker>(worker_options, p.state.sensors, p.queues.get(), p.hub.get());
   const bool loaded = base != nullptr;

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "fusion/core/fusion_rules.h"
+#include "fusion/core/projective_render.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
 
@@ -16,19 +17,16 @@ constexpr double kRes = 0.04;
 
 struct Leaf {
   octomap::OcTreeKey key;
+  unsigned depth;
   float log_odds;
 };
 
+// Leaves in iteration order (depth first), coarse ones with their depth.
 std::vector<Leaf> Leaves(const octomap::OcTree& tree) {
   std::vector<Leaf> leaves;
   for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
-    // Log-odds 0 is unknown (a voxel whose last opinion went away keeps its
-    // node at 0).
-    if (it->getLogOdds() != 0.0f) leaves.push_back({it.getKey(), it->getLogOdds()});
+    leaves.push_back({it.getKey(), it.getDepth(), it->getLogOdds()});
   }
-  std::sort(leaves.begin(), leaves.end(), [](const Leaf& a, const Leaf& b) {
-    return std::lexicographical_compare(a.key.k, a.key.k + 3, b.key.k, b.key.k + 3);
-  });
   return leaves;
 }
 
@@ -38,8 +36,14 @@ void ExpectSameLeaves(const octomap::OcTree& a, const octomap::OcTree& b) {
   ASSERT_EQ(la.size(), lb.size());
   for (std::size_t i = 0; i < la.size(); ++i) {
     ASSERT_EQ(la[i].key, lb[i].key) << i;
+    ASSERT_EQ(la[i].depth, lb[i].depth) << i;
     ASSERT_EQ(la[i].log_odds, lb[i].log_odds) << i;
   }
+}
+
+// A sensor's opinion as the map renders it.
+RenderedGrid Opinion(const WorldMap& map, const std::string& id, const Eigen::Isometry3d& T) {
+  return Render(*map.beam_grid(id), T, MapRenderOptions(map.options()));
 }
 
 class WorldMapTest : public ::testing::Test {
@@ -94,10 +98,10 @@ TEST_F(WorldMapTest, RenderingTheSamePeriodTwiceLeavesTheMapUnchanged) {
   octomap::OcTree before(map.tree());
   FuseStats stats;
   ASSERT_EQ(map.Render("sr", &stats), MapStatus::kOk);
-  EXPECT_EQ(stats.voxels_changed, 0u);
+  EXPECT_EQ(stats.regions_changed, 0u);
   EXPECT_EQ(map.version(), version);
   ExpectSameLeaves(before, map.tree());
-  EXPECT_TRUE(map.ChangedKeysSince(version)->empty());
+  EXPECT_EQ(map.Publish().changes.version, version);  // nothing new to publish
 }
 
 TEST_F(WorldMapTest, ReRenderReplacesThePeriodInsteadOfAddingIt) {
@@ -174,36 +178,50 @@ TEST_F(WorldMapTest, CommitOnRequestKeepsTheMapAndRestartsTheGrid) {
   ExpectSameLeaves(rendered, map.tree());
 }
 
-TEST_F(WorldMapTest, ChangedKeysSinceAVersion) {
+TEST_F(WorldMapTest, PublicationsNameTheRegionsTheyChanged) {
   WorldMap map(options_);
   ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
   ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
   ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
-  const auto all = map.ChangedKeysSince(0);
-  ASSERT_TRUE(all.has_value());
-  EXPECT_EQ(all->size(), map.tree().getNumLeafNodes());
-  const std::uint64_t v1 = map.version();
+  const Publication first = map.Publish();
+  EXPECT_EQ(first.changes.version, 1u);
+  // The first version changed everything the map holds.
+  std::size_t covered = 0;
+  for (auto it = first.tree->begin_leafs(); it != first.tree->end_leafs(); ++it) ++covered;
+  EXPECT_GT(covered, 0u);
+  EXPECT_GE(first.changes.regions.size(), covered / 8);
+  const octomap::OcTree before(*first.tree);
   ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
   ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
-  EXPECT_EQ(map.version(), v1 + 1);
-  const auto changed = map.ChangedKeysSince(v1);
-  ASSERT_TRUE(changed.has_value());
-  EXPECT_GT(changed->size(), 0u);
-  EXPECT_LE(changed->size(), map.tree().getNumLeafNodes());
-  for (const auto& key : *changed) ASSERT_NE(map.tree().search(key), nullptr);
-  EXPECT_TRUE(map.ChangedKeysSince(map.version())->empty());
-}
-
-TEST_F(WorldMapTest, ChangeHistoryIsBounded) {
-  options_.change_history_keys = 10;
-  WorldMap map(options_);
-  ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
-  for (int i = 0; i < 3; ++i) {
-    ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
-    ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  const Publication second = map.Publish();
+  EXPECT_EQ(second.changes.version, 2u);
+  EXPECT_FALSE(second.changes.reset);
+  ASSERT_FALSE(second.changes.regions.empty());
+  // Every voxel whose value changed lies in a reported region; the first tree was not touched.
+  const auto reported = [&](const octomap::OcTreeKey& key) {
+    const std::uint64_t code = MortonOf(key);
+    for (const MapRegion& r : second.changes.regions) {
+      if (code >= r.code && code < r.code + MortonSpan(r.depth)) return true;
+    }
+    return false;
+  };
+  std::size_t changed_voxels = 0;
+  for (auto it = second.tree->begin_leafs(); it != second.tree->end_leafs(); ++it) {
+    if (it.getDepth() < 13) continue;  // large free blocks: checked through their neighbours
+    const int side = 1 << (16 - it.getDepth());
+    const octomap::OcTreeKey first_key = KeyOfMorton(MortonAtDepth(MortonOf(it.getKey()), it.getDepth()));
+    for (int x = 0; x < side; ++x)
+      for (int y = 0; y < side; ++y)
+        for (int z = 0; z < side; ++z) {
+          const octomap::OcTreeKey k(first_key[0] + x, first_key[1] + y, first_key[2] + z);
+          const octomap::OcTreeNode* old = before.search(k);
+          if (old != nullptr && old->getLogOdds() == it->getLogOdds()) continue;
+          ++changed_voxels;
+          ASSERT_TRUE(reported(k));
+        }
   }
-  EXPECT_FALSE(map.ChangedKeysSince(0).has_value());  // too old: resynchronise
-  EXPECT_TRUE(map.ChangedKeysSince(map.version() - 1).has_value());
+  EXPECT_GT(changed_voxels, 0u);
+  ExpectSameLeaves(before, *first.tree);
 }
 
 TEST_F(WorldMapTest, TwoSensorsFuseWithEq16) {
@@ -221,13 +239,15 @@ TEST_F(WorldMapTest, TwoSensorsFuseWithEq16) {
   ASSERT_EQ(map.Render("b"), MapStatus::kOk);
   // Each sensor's opinion: its beam grid rendered alone. Every shared voxel
   // must hold Eq. 16 of the two.
-  const LocalGrid la = RenderBeamGrid(*map.beam_grid("a"), pose_, map.options().render);
-  const LocalGrid lb = RenderBeamGrid(*map.beam_grid("b"), pose_b, map.options().render);
+  const RenderedGrid la = Opinion(map, "a", pose_);
+  const RenderedGrid lb = Opinion(map, "b", pose_b);
   std::size_t shared = 0;
   std::size_t disagreeing = 0;
-  la.ForEachLogOdds([&](const octomap::OcTreeKey& key, float l_a) {
-    const auto l_b = lb.LogOddsOf(key);
-    if (!l_b) return;
+  for (const MapNode& node_a : la.nodes()) {
+    const octomap::OcTreeKey key = KeyOfMorton(node_a.code);
+    const float l_a = node_a.log_odds;
+    const auto l_b = lb.LogOddsAt(key);
+    if (!l_b) continue;
     ++shared;
     const double p_a = ProbabilityFromLogOdds(l_a);
     const double p_b = ProbabilityFromLogOdds(*l_b);
@@ -236,7 +256,7 @@ TEST_F(WorldMapTest, TwoSensorsFuseWithEq16) {
     ASSERT_NE(node, nullptr);
     EXPECT_NEAR(node->getOccupancy(), expected, 1e-4);
     if ((p_a > 0.6 && p_b < 0.4) || (p_a < 0.4 && p_b > 0.6)) ++disagreeing;
-  });
+  }
   EXPECT_GT(shared, 1000u);
   EXPECT_GT(disagreeing,
             0u);  // one sees occupied, the other free: Eq. 16 decides
@@ -254,17 +274,19 @@ TEST_F(WorldMapTest, MaxAndDeMorganRules) {
     ASSERT_EQ(Add(&map, "b", pose_b, simulator_.Capture(pose_b)), MapStatus::kOk);
     ASSERT_EQ(map.Render("a"), MapStatus::kOk);
     ASSERT_EQ(map.Render("b"), MapStatus::kOk);
-    const LocalGrid la = RenderBeamGrid(*map.beam_grid("a"), pose_, map.options().render);
-    const LocalGrid lb = RenderBeamGrid(*map.beam_grid("b"), pose_b, map.options().render);
+    const RenderedGrid la = Opinion(map, "a", pose_);
+    const RenderedGrid lb = Opinion(map, "b", pose_b);
     std::size_t checked = 0;
-    la.ForEachLogOdds([&](const octomap::OcTreeKey& key, float l_a) {
-      const auto l_b = lb.LogOddsOf(key);
-      if (!l_b || checked > 2000) return;
+    for (const MapNode& node_a : la.nodes()) {
+      const octomap::OcTreeKey key = KeyOfMorton(node_a.code);
+      const auto l_b = lb.LogOddsAt(key);
+      if (!l_b || checked > 2000) continue;
       ++checked;
       const double expected = std::clamp(
-          Fuse(rule, ProbabilityFromLogOdds(l_a), ProbabilityFromLogOdds(*l_b)), 0.001, 0.999);
+          Fuse(rule, ProbabilityFromLogOdds(node_a.log_odds), ProbabilityFromLogOdds(*l_b)),
+          0.001, 0.999);
       EXPECT_NEAR(map.tree().search(key)->getOccupancy(), expected, 1e-4);
-    });
+    }
     EXPECT_GT(checked, 100u);
   }
 }

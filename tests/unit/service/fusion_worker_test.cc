@@ -69,7 +69,7 @@ class FusionWorkerTest : public ::testing::Test {
   }
 
   IngestQueues queues_{{{"s", 64}}};
-  SnapshotHub hub_{SnapshotHub::kDefaultMaxLoggedKeys, kResolutionM};
+  SnapshotHub hub_{SnapshotHub::kDefaultMaxLoggedRegions, kResolutionM};
   std::unique_ptr<BeamTessellation> tessellation_;
   std::unique_ptr<FusionWorker> worker_;
   std::uint64_t seq_ = 0;

@@ -212,33 +212,36 @@ std::shared_ptr<const MapSnapshot> Version(std::uint64_t v) {
   return s;
 }
 
+MapChanges Changes(std::uint64_t v, std::vector<MapRegion> regions, bool reset = false) {
+  return {v, reset, std::move(regions)};
+}
+
 TEST(ServiceIngestTest, HubLogsChangesAndForgetsTheOldest) {
-  SnapshotHub hub(/*max_logged_keys=*/3);
+  SnapshotHub hub(/*max_logged_regions=*/3);
   std::atomic<int> notified{0};
   const int id = hub.Subscribe([&] { ++notified; });
-  const octomap::OcTreeKey a(1, 1, 1), b(2, 2, 2), c(3, 3, 3);
-  hub.Publish(Version(1), {a, b}, false);
-  hub.Publish(Version(2), {b}, false);
+  const MapRegion a{MortonOf(octomap::OcTreeKey(1, 1, 1)), 16},
+      b{MortonOf(octomap::OcTreeKey(2, 2, 2)), 16}, c{MortonOf(octomap::OcTreeKey(3, 3, 3)), 16};
+  hub.Publish(Version(1), Changes(1, {a, b}));
+  hub.Publish(Version(2), Changes(2, {b}));
   EXPECT_EQ(hub.Current()->version, 2u);
-  std::vector<octomap::OcTreeKey> keys;
-  ASSERT_TRUE(hub.ChangedSince(0, &keys));
-  EXPECT_EQ(keys.size(), 2u);  // deduplicated
-  keys.clear();
-  ASSERT_TRUE(hub.ChangedSince(1, &keys));
-  ASSERT_EQ(keys.size(), 1u);
-  EXPECT_EQ(keys[0], b);
-  hub.Publish(Version(3), {c}, false);  // 4 keys > 3: version 1 is forgotten
-  keys.clear();
-  EXPECT_FALSE(hub.ChangedSince(0, &keys));
-  EXPECT_TRUE(hub.ChangedSince(1, &keys));
-  hub.Publish(Version(4), {}, true);  // reset: nothing before 4 is known
-  EXPECT_FALSE(hub.ChangedSince(3, &keys));
+  std::vector<MapRegion> regions;
+  ASSERT_TRUE(hub.ChangedSince(0, &regions));
+  EXPECT_EQ(regions.size(), 2u);  // deduplicated
+  ASSERT_TRUE(hub.ChangedSince(1, &regions));
+  ASSERT_EQ(regions.size(), 1u);
+  EXPECT_EQ(regions[0], b);
+  hub.Publish(Version(3), Changes(3, {c}));  // 4 regions > 3: version 1 is forgotten
+  EXPECT_FALSE(hub.ChangedSince(0, &regions));
+  EXPECT_TRUE(hub.ChangedSince(1, &regions));
+  hub.Publish(Version(4), Changes(4, {}, /*reset=*/true));  // nothing before 4 is known
+  EXPECT_FALSE(hub.ChangedSince(3, &regions));
   // Subscribers hear of the publishes on the hub's thread, possibly several in one call.
   hub.Flush();
   const int heard = notified.load();
   EXPECT_GE(heard, 1);
   EXPECT_LE(heard, 4);
-  hub.Publish(Version(5), {a}, false);
+  hub.Publish(Version(5), Changes(5, {a}));
   hub.Flush();
   EXPECT_GT(notified.load(), heard);
   const int before_close = notified.load();

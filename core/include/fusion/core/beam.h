@@ -27,6 +27,20 @@ inline constexpr double kNoInformationTail = 1e-100;
 // length). Throws std::invalid_argument unless the result lies in (0, 1).
 [[nodiscard]] double ResolvePriorCellOccupancy(const BeamGridOptions& options);
 
+// What a renderer needs of one beam from a start cell `from` on (BeamStore::Profile):
+//   mass_begin: the first cell c >= from whose p(m_c) exceeds free_ratio * p0 (the first-hit
+//               mass starts there; cells before it are the beam's free zone), N + 1 if none;
+//   info_end:   the smallest cell c in (from, N] with S(c) < tail_fraction * S(from)
+//               (TailDropCell), N + 1 if none;
+//   free_hazard: -log(S(end) / S(from)) over the free zone [from, end), end = min(mass_begin,
+//               N): the zone's cumulative hazard, to compare with the prior's (0 if empty).
+// A cell without information (S <= kNoInformationTail * total) ends the free zone.
+struct BeamProfileCells {
+  std::uint32_t mass_begin = 0;
+  std::uint32_t info_end = 0;
+  double free_hazard = 0.0;
+};
+
 // Eq. 7: p(B) (N + 1 values) from p(m) (N values).
 [[nodiscard]] std::vector<double> FirstHitFromCells(const std::vector<double>& p_m);
 // Eq. 8 on (possibly unnormalised) p(B) weights (N + 1 values); tails are summed from the far
@@ -93,6 +107,9 @@ class DenseBeam {
   // The smallest cell c in (from, N] with S(c) < fraction * S(from); N + 1 if there is none.
   [[nodiscard]] std::uint32_t TailDropCell(const BeamContext& ctx, std::uint32_t from,
                                            double fraction) const;
+  // The reference: every cell evaluated.
+  [[nodiscard]] BeamProfileCells Profile(const BeamContext& ctx, std::uint32_t from,
+                                         double tail_fraction, double free_ratio) const;
   [[nodiscard]] bool touched() const { return touched_; }
   [[nodiscard]] std::size_t MemoryBytes() const;
   void Prefetch() const {}
@@ -129,6 +146,11 @@ class UllBeam {
   // As DenseBeam::TailDropCell; walks the list from the far end and stops at the crossing.
   [[nodiscard]] std::uint32_t TailDropCell(const BeamContext& ctx, std::uint32_t from,
                                            double fraction) const;
+  // As DenseBeam::Profile, composite by composite: a UEC's p(m) falls along the run while it
+  // lies below p0 (w_{j+1} / S_{j+1} < w_j / S_j iff w_j < p0 S_j), so only its first cell is
+  // tested; an EC is tested cell by cell.
+  [[nodiscard]] BeamProfileCells Profile(const BeamContext& ctx, std::uint32_t from,
+                                         double tail_fraction, double free_ratio) const;
   [[nodiscard]] bool touched() const { return touched_; }
   [[nodiscard]] std::size_t MemoryBytes() const;
   // Hints the cache about the memory the next Update will touch (no effect on results).
@@ -184,6 +206,9 @@ class BeamStore {
                           std::vector<double>* out) const = 0;
   [[nodiscard]] virtual std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,
                                                    double fraction) const = 0;
+  [[nodiscard]] virtual BeamProfileCells Profile(std::size_t beam, std::uint32_t from,
+                                                 double tail_fraction,
+                                                 double free_ratio) const = 0;
   [[nodiscard]] virtual bool Touched(std::size_t beam) const = 0;
   virtual void Reset() = 0;
   [[nodiscard]] virtual std::size_t MemoryBytes() const = 0;  // beams only, not the context

@@ -33,6 +33,17 @@ class BeamTessellation {
   [[nodiscard]] std::optional<std::size_t> BeamOfByAngles(const Eigen::Vector3d& p_sensor) const;
   // Unit vector of the beam's centre line in the sensor frame.
   [[nodiscard]] Eigen::Vector3d Direction(std::size_t beam) const;
+  // FOVs narrower than 180 degrees have tangent tables (BeamOf uses them; so does the
+  // projective render, which needs the beams a box of space overlaps): the tangents of the FOV
+  // edges, and the column / row whose beam holds a direction with the given tangent of azimuth
+  // (x / z) / elevation (-y / hypot(x, z)), clamped into the grid.
+  [[nodiscard]] bool HasTangentEdges() const { return !tan_col_edges_.empty(); }
+  [[nodiscard]] double TanAzimuthMin() const { return tan_col_edges_.lo(); }
+  [[nodiscard]] double TanAzimuthMax() const { return tan_col_edges_.hi(); }
+  [[nodiscard]] double TanElevationMin() const { return tan_row_edges_.lo(); }
+  [[nodiscard]] double TanElevationMax() const { return tan_row_edges_.hi(); }
+  [[nodiscard]] int ColumnOfTangent(double tan_azimuth) const;
+  [[nodiscard]] int RowOfTangent(double tan_elevation) const;
   // Angular size of one beam (full widths).
   [[nodiscard]] double beam_width_h_rad() const;
   [[nodiscard]] double beam_width_v_rad() const;
@@ -50,6 +61,8 @@ class BeamTessellation {
     explicit Edges(std::vector<double> edges);
     [[nodiscard]] bool empty() const { return edges_.empty(); }
     [[nodiscard]] bool Contains(double v) const { return v >= edges_.front() && v <= edges_.back(); }
+    [[nodiscard]] double lo() const { return edges_.front(); }
+    [[nodiscard]] double hi() const { return edges_.back(); }
     // Inner edges (all but the first and last) <= v, resp. < v; v within the edges.
     [[nodiscard]] int InnerAtOrBelow(double v) const;
     [[nodiscard]] int InnerBelow(double v) const;
@@ -85,6 +98,19 @@ struct IntegrationStats {
   std::size_t missing = 0;             // NaN / zero points: no information, beam untouched
   std::size_t rejected_nonfinite = 0;  // inf or mixed NaN coordinates
   std::size_t rejected_outside_fov = 0;
+};
+
+// Where a beam's information lies, from a start range on (BeamGrid::Profile).
+struct BeamProfile {
+  // Range (cell edge) where the first-hit mass starts: the first cell whose p(m) exceeds
+  // free_ratio times the prior; +infinity if no cell does (the beam is free to its end).
+  double mass_begin_m = 0.0;
+  // InformationEndM(beam, from_m, tail_fraction).
+  double info_end_m = 0.0;
+  // The free zone [from_m, min(mass_begin_m, beam end)): its cumulative hazard against the
+  // prior's over the same length, as log-odds (about the evidence a voxel-long segment of the
+  // zone carries, logit(p) - logit(prior)); -infinity if the zone is empty.
+  double free_log_odds = 0.0;
 };
 
 // One reading along a beam.
@@ -152,6 +178,10 @@ class BeamGrid {
   // that the beam's first hit still lies ahead has fallen below `fraction`. +infinity if
   // S never falls that low (the beam may see through).
   [[nodiscard]] double InformationEndM(std::size_t beam, double from_m, double fraction) const;
+  // Both ends of the beam's first-hit mass and the evidence of its free zone, in one walk of
+  // the beam (docs/mapping.md, "Projective render"). free_ratio in (0, 1).
+  [[nodiscard]] BeamProfile Profile(std::size_t beam, double from_m, double tail_fraction,
+                                    double free_ratio) const;
   // Prior occupancy of an interval of the given length (what an untouched beam reports).
   [[nodiscard]] double PriorOccupancy(double length_m) const;
   // True if the beam has received at least one reading since construction or Reset.

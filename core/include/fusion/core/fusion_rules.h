@@ -5,6 +5,7 @@
 // helpers use the natural logarithm, as OctoMap does.
 #pragma once
 
+#include <cstddef>
 #include <optional>
 #include <string>
 #include <vector>
@@ -42,5 +43,23 @@ enum class FusionRule {
 [[nodiscard]] double Fuse(FusionRule rule, double p1, double p2);
 // Folds a list of opinions with the rule; an empty list gives 0.5 (unknown).
 [[nodiscard]] double FuseAll(FusionRule rule, const std::vector<double>& probabilities);
+
+// The fusion of the map: one rule over log-odds opinions, the result clamped (as OctoMap's
+// clamping) so that the map stays updatable. Every fused value of the system (committed history,
+// the map queries read, a snapshot loaded at start) comes from Fuse.
+struct FusionPolicy {
+  static constexpr double kDefaultClampingMin = 0.001;
+  static constexpr double kDefaultClampingMax = 0.999;
+
+  FusionRule rule = FusionRule::kIndependentOpinionPool;
+  float clamp_min_log_odds = static_cast<float>(-6.906754778648554);  // logit(0.001)
+  float clamp_max_log_odds = static_cast<float>(6.906754778648554);   // logit(0.999)
+
+  // From clamping probabilities in (0, 1), min < max.
+  [[nodiscard]] static FusionPolicy Make(FusionRule rule, double clamping_min_probability,
+                                         double clamping_max_probability);
+  // The rule over n >= 1 log-odds opinions, clamped.
+  [[nodiscard]] float Fuse(const float* log_odds, std::size_t n) const;
+};
 
 }  // namespace fusion

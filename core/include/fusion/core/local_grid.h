@@ -36,13 +36,29 @@ enum class VoxelCombine {
   kIndependentPool,
 };
 
+// How a beam grid becomes map voxels (docs/mapping.md).
+enum class RenderMethod {
+  // Top-down over octree blocks against a pyramid of the beams (RenderProjective): free and
+  // unknown space decided block by block, rays traced only through each beam's first-hit mass.
+  kProjective,
+  // Every ray traced voxel by voxel from r_min on (RenderBeamGrid): slow and obvious, the
+  // oracle of the projective render.
+  kRayTraced,
+};
+
 struct RenderOptions {
   static constexpr double kDefaultTailMass = 1e-2;
+  static constexpr double kDefaultFreeRatio = 0.03;
   static constexpr int kDefaultMaxSubraysPerAxis = 3;
   static constexpr double kDefaultMaxAbsLogOdds = 12.0;
 
   double resolution_m = 0.02;
+  RenderMethod method = RenderMethod::kProjective;
   VoxelCombine combine = VoxelCombine::kMaxLogOdds;
+  // Projective render: a beam's free zone ends at the first cell whose occupancy p(m) exceeds
+  // this fraction of the prior's (BeamGrid::Profile); a block wholly in front of the free zone's
+  // end in every beam it overlaps is free as a whole, its evidence about log(free_ratio) or less.
+  double free_ratio = kDefaultFreeRatio;
   // A ray stops after the voxel where the remaining first-hit mass S (relative
   // to where the rendering started) falls below this: everything behind carries
   // no information.
@@ -65,7 +81,11 @@ struct RenderStats {
   std::size_t beams_untouched = 0;  // skipped: no reading, no information
   std::size_t rays_traced = 0;
   std::size_t segments = 0;  // voxel crossings with evidence
-  std::size_t voxels = 0;    // distinct voxels in the local grid
+  std::size_t voxels = 0;    // distinct voxels in the local grid (projective: voxels traced)
+  // Projective render: nodes of the result decided as whole blocks above voxel size, and
+  // single voxels.
+  std::size_t coarse_nodes = 0;
+  std::size_t fine_voxels = 0;
 };
 
 // World-frame voxel key of a point at the given resolution; identical to
@@ -100,6 +120,8 @@ class LocalGrid {
       if (e.packed != kEmpty) f(Unpack(e.packed), CombinedLogOdds(e));
     }
   }
+  // Makes room for this many voxels without growing.
+  void Reserve(std::size_t voxels);
   // Folds another grid of the same resolution and rule into this one, as if its segments had
   // been added here.
   void Merge(const LocalGrid& other);

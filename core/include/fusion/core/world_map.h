@@ -1,17 +1,28 @@
-// The fused world map and its life cycle (DESIGN.md, "Map life cycle").
+// The fused world map and its life cycle (DESIGN.md, "Map life cycle"), and the one fusion
+// path of the system.
 //
-// Each sensor owns a beam grid that accumulates clouds while the sensor's pose
-// stays within a tolerance (a "stationary period"). Rendering the period gives
-// the sensor's live local grid; the map that queries see is, per voxel, the
-// fusion rule applied to the committed history and every sensor's live grid.
-// Re-rendering a period therefore replaces its contribution instead of adding
-// it again. When the pose moves past the tolerance (or on Commit) the live grid
-// is folded into the committed history and the beam grid restarts at the new
-// pose.
+// The map queries see is, region by region, FusionPolicy::Fuse over the committed history
+// (an octree, coarse nodes included, which a snapshot loaded at start becomes) and every
+// sensor's live contribution (the render of its open period). Replacing a sensor's live
+// contribution re-fuses only the regions the old or the new one covers; committing folds it
+// into the history. Every change goes through FuseRegions (octree_merge.h), and each published
+// version says which regions it changed (MapChanges), for the change log.
 //
-// Frames: poses are T_world_sensor (sensor optical frame -> world); clouds are
-// in the sensor frame; the octree is in the world frame. Not thread-safe: one
-// writer, callers serialise.
+// Publication: Publish() hands out the map as an immutable octree. Two trees take turns: the
+// one published last is read by queries while the other is written; before the next write the
+// other is brought up to date by copying in the regions of the versions it missed, so no
+// version is a deep copy of the map (unless a reader still holds the tree that is due to be
+// written: then it is copied once).
+//
+// Two ways to drive it:
+//  - The pieces, for a pipelined caller (fusiond): integrate with its own SensorPeriods, render
+//    with Render() (projective_render.h), then ReplaceLive / CommitLive / Publish here.
+//  - Integrate / Render / Commit below, which do all of that in turn on the caller's thread
+//    (tests, benchmarks, the accuracy harness) and publish after each change.
+//
+// Frames: poses are T_world_sensor (sensor optical frame -> world); clouds are in the sensor
+// frame; the octree is in the world frame. Not thread-safe: one writer; published trees may be
+// read from any thread.
 #pragma once
 
 #include <octomap/OcTree.h>
@@ -19,18 +30,19 @@
 #include <Eigen/Geometry>
 #include <cstddef>
 #include <cstdint>
-#include <deque>
 #include <map>
 #include <memory>
 #include <optional>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "fusion/core/beam_grid.h"
+#include "fusion/core/change_log.h"
 #include "fusion/core/fusion_rules.h"
 #include "fusion/core/local_grid.h"
+#include "fusion/core/rendered_grid.h"
 #include "fusion/core/sensor.h"
+#include "fusion/core/sensor_periods.h"
 
 namespace fusion {
 
@@ -38,8 +50,8 @@ struct WorldMapOptions {
   static constexpr double kDefaultResolutionM = 0.02;
   static constexpr double kDefaultPoseToleranceM = 0.01;
   static constexpr double kDefaultPoseToleranceRad = 0.0175;  // ~1 degree
-  static constexpr double kDefaultClampingMin = 0.001;
-  static constexpr double kDefaultClampingMax = 0.999;
+  static constexpr double kDefaultClampingMin = FusionPolicy::kDefaultClampingMin;
+  static constexpr double kDefaultClampingMax = FusionPolicy::kDefaultClampingMax;
   static constexpr double kDefaultBeamPriorLengthM = 1.0;
 
   double resolution_m = kDefaultResolutionM;
@@ -61,19 +73,15 @@ struct WorldMapOptions {
   // stays updatable.
   double clamping_min_probability = kDefaultClampingMin;
   double clamping_max_probability = kDefaultClampingMax;
-  // Changed keys kept for ChangedKeysSince (oldest versions dropped first; the
-  // newest version is always kept whole).
-  std::size_t change_history_keys = std::size_t{1} << 24;
+  // The trees' OcTree::setOccupancyThres (what OctoMap's own readers, castRay and the .bt
+  // writer, call occupied).
+  double occupancy_threshold = 0.5;
 };
 
-enum class MapStatus {
-  kOk,
-  kUnknownSensor,
-  kDuplicateSensor,
-  kInvalidPose,      // non-finite translation or a non-rotation matrix
-  kInvalidArgument,  // e.g. null points with a non-zero count
-};
-[[nodiscard]] const char* MapStatusName(MapStatus status);
+// The beam grid options a sensor of this map gets (the beam prior applied).
+[[nodiscard]] BeamGridOptions SensorGridOptions(const WorldMapOptions& options);
+// The render options of this map (its resolution applied).
+[[nodiscard]] RenderOptions MapRenderOptions(const WorldMapOptions& options);
 
 struct SensorCounters {
   std::uint64_t frames_integrated = 0;
@@ -85,12 +93,18 @@ struct SensorCounters {
   std::uint64_t points_beyond_range = 0;
   std::uint64_t points_missing = 0;
   std::uint64_t points_rejected = 0;
-  std::size_t live_voxels = 0;
+  std::size_t live_nodes = 0;  // nodes of the live contribution
 };
 
 struct FuseStats {
   RenderStats render;
-  std::size_t voxels_changed = 0;
+  std::size_t regions_changed = 0;
+};
+
+// One published version of the map.
+struct Publication {
+  std::shared_ptr<const octomap::OcTree> tree;  // never null
+  MapChanges changes;                            // changes.version is the map's version
 };
 
 class WorldMap {
@@ -102,84 +116,88 @@ class WorldMap {
 
   [[nodiscard]] const WorldMapOptions& options() const { return options_; }
   [[nodiscard]] double resolution_m() const { return options_.resolution_m; }
+  [[nodiscard]] const FusionPolicy& policy() const { return policy_; }
 
   MapStatus AddSensor(const std::string& sensor_id, const SensorSpec& spec);
   [[nodiscard]] bool HasSensor(const std::string& sensor_id) const;
   [[nodiscard]] std::vector<std::string> SensorIds() const;
 
+  // ---- The pieces -------------------------------------------------------------------------
+  // Replaces the sensor's live contribution by `rendered` (a render of its open period) and
+  // re-fuses the regions the old or the new one covers.
+  MapStatus ReplaceLive(const std::string& sensor_id, RenderedGrid rendered,
+                        FuseStats* stats = nullptr);
+  // Folds the sensor's live contribution into the committed history; the map does not change
+  // (it already holds it) unless other sensors' live contributions overlap it.
+  MapStatus CommitLive(const std::string& sensor_id);
+  // The map so far becomes the committed history of a map that starts from it (a snapshot
+  // loaded at start); every live contribution is dropped. Voxels are fused (clamped) as they
+  // come in. Versions go on; the next publication is a reset.
+  void LoadHistory(const octomap::OcTree& history);
+  // Clears the history, every live contribution and every period; the next publication is a
+  // reset.
+  void Reset();
+  // Publishes the map if it changed since the last publication (a new version), else returns
+  // the last one again.
+  Publication Publish();
+
+  // ---- All in turn, on the caller's thread ------------------------------------------------
   // Applies one cloud (sensor frame, 3 floats per point; beyond_range as in
-  // BeamGrid::Integrate) taken at T_world_sensor. If the pose left the
-  // tolerance around the current period's pose, the period is committed first
-  // (rendered if it has unrendered frames) and the beam grid restarts at the
-  // new pose. Does not render: call Render.
+  // BeamGrid::Integrate) taken at T_world_sensor. If the pose left the tolerance around the
+  // current period's pose, the period is committed first (rendered if it has unrendered
+  // frames) and a new period starts at the new pose. Does not render: call Render.
   MapStatus Integrate(const std::string& sensor_id, const Eigen::Isometry3d& T_world_sensor,
                       const float* points_xyz, std::size_t point_count,
                       const std::vector<std::uint8_t>& beyond_range = {},
                       IntegrationStats* stats = nullptr, bool* committed = nullptr);
-  // Renders the sensor's current period and replaces its previous live
-  // contribution.
+  // Renders the sensor's open period and replaces its live contribution; publishes.
   MapStatus Render(const std::string& sensor_id, FuseStats* stats = nullptr);
   // Renders every sensor with unrendered frames.
   void RenderAll();
-  // Folds the sensor's live contribution into the committed history and
-  // restarts its beam grid (the next cloud starts a new period at its own
-  // pose).
+  // Folds the sensor's live contribution into the committed history and restarts its period
+  // (rendered first if it has unrendered frames); publishes.
   MapStatus Commit(const std::string& sensor_id);
 
-  // The fused map (world frame, log-odds per leaf). Voxels no sensor has
-  // information about have no node, or a node at log-odds exactly 0 (p = 0.5)
-  // once their last opinion went away.
-  [[nodiscard]] const octomap::OcTree& tree() const { return *tree_; }
-  // Incremented on every Render / Commit that changed the map.
+  // ---- The map ----------------------------------------------------------------------------
+  // The fused map as it is now (world frame, log-odds per leaf, coarse leaves where a block is
+  // uniform). Valid until the next change; Publish() for a tree that stays.
+  [[nodiscard]] const octomap::OcTree& tree() const;
+  // The version of the last publication (0: none yet).
   [[nodiscard]] std::uint64_t version() const { return version_; }
-  // Keys whose fused value changed (including back to unknown) after `version`,
-  // each once. std::nullopt if that version is older than the retained change
-  // history (options.change_history_keys): the caller must resynchronise from
-  // the whole tree.
-  [[nodiscard]] std::optional<std::vector<octomap::OcTreeKey>> ChangedKeysSince(
-      std::uint64_t version) const;
   [[nodiscard]] std::optional<SensorCounters> Counters(const std::string& sensor_id) const;
+  // The beam grid of the sensor's open period (Integrate / Render above); nullptr for an
+  // unknown sensor.
   [[nodiscard]] const BeamGrid* beam_grid(const std::string& sensor_id) const;
-  // Fused occupancy of a world point; std::nullopt where the map has no
-  // information (no node, or log-odds exactly 0).
+  // Fused occupancy of a world point; std::nullopt where the map has no information.
   [[nodiscard]] std::optional<double> Occupancy(const Eigen::Vector3d& p_world) const;
+  // Nodes of the committed history, the working and the published trees, and of the live
+  // contributions, in bytes (OcTree::memoryUsage and RenderedGrid::MemoryBytes).
+  [[nodiscard]] std::size_t MemoryBytes() const;
+  // Publications that had to copy a tree a reader still held (see the top of this file).
+  [[nodiscard]] std::uint64_t tree_copies() const { return tree_copies_; }
 
  private:
   struct SensorState;
-  [[nodiscard]] bool Moved(const SensorState& s, const Eigen::Isometry3d& T_world_sensor) const;
-  // Recomputes the fused value of one key from committed history and live
-  // grids.
-  bool Refuse(const octomap::OcTreeKey& key);
-  MapStatus CommitState(SensorState& s);
-  void RenderState(SensorState& s, FuseStats* stats);
+  SensorState* Find(const std::string& sensor_id);
+  [[nodiscard]] const SensorState* Find(const std::string& sensor_id) const;
+  // The tree to write, brought up to date (see Publication above).
+  octomap::OcTree& Working();
+  std::vector<MergeSource> Sources(const SensorState* except) const;
 
   WorldMapOptions options_;
-  std::unique_ptr<octomap::OcTree> tree_;
+  FusionPolicy policy_;
+  RenderOptions render_;
   std::map<std::string, std::unique_ptr<SensorState>> sensors_;
-  std::unordered_map<octomap::OcTreeKey, float, octomap::OcTreeKey::KeyHash> committed_;
-  // Change log: keys changed by each version (ascending), bounded by
-  // change_history_keys.
-  struct Change {
-    std::uint64_t version;
-    std::vector<octomap::OcTreeKey> keys;
-  };
-  std::vector<Change> changes_;
-  std::size_t change_log_keys_ = 0;
-  std::uint64_t oldest_complete_version_ = 0;  // ChangedKeysSince(v) is exact for v >= this
-  std::vector<octomap::OcTreeKey> pending_;    // keys changed by the version being built
-  void PublishVersion();
-  // Full-depth leaf of a key, created (value 0) if create; a cached
-  // root-to-leaf path makes consecutive nearby keys cheap.
-  octomap::OcTreeNode* FindLeaf(const octomap::OcTreeKey& key, bool create,
-                                bool* created = nullptr);
-  octomap::OcTreeNode* cursor_path_[17] = {};
-  octomap::OcTreeKey cursor_key_;
-  unsigned cursor_depth_ = 0;
-  bool cursor_valid_ = false;
+  std::unique_ptr<octomap::OcTree> committed_;
+  std::shared_ptr<octomap::OcTree> working_;    // null between Publish and the next write
+  std::shared_ptr<octomap::OcTree> published_;  // never null
+  std::shared_ptr<octomap::OcTree> spare_;      // the publication before, reused when free
+  std::vector<MapRegion> spare_lag_;            // regions the spare lacks
+  std::vector<MapRegion> pending_;              // changed since the last publication
+  bool pending_reset_ = false;
   std::uint64_t version_ = 0;
-  float clamp_min_log_odds_;
-  float clamp_max_log_odds_;
-  std::vector<double> scratch_;
+  Publication last_;
+  std::uint64_t tree_copies_ = 0;
 };
 
 }  // namespace fusion

@@ -1,13 +1,23 @@
-// The fusion worker: one thread that drains the ingest queues into core's WorldMap, renders at
-// the configured cadence and publishes each new map version as an immutable snapshot.
+// The fusion worker: two threads between the ingest queues and the published map.
 //
-// The published map is, per voxel, the fusion rule applied to the snapshot loaded at start
-// (the "base", committed history of an earlier run) and WorldMap's fused map.
+//  - The integrator drains the ingest queues into each sensor's open period (core's
+//    SensorPeriods). A cloud from beyond the pose tolerance seals the period and hands it to the
+//    renderer; the integrator goes on at once with a new period, never waiting for the render of
+//    an older one. When a sensor already has kMaxSealedPeriods waiting, its clouds are merged
+//    into the open period instead (counted as `merged`): evidence is never thrown away. With
+//    reliable ingest (wait_for_renderer) the integrator waits for room instead, so a replayed
+//    recording is mapped exactly as taken.
+//  - The renderer takes sealed periods in order (render, commit into the map's history), and when
+//    none is waiting re-renders open periods with new frames (the sensor's integration waits for
+//    that render of its own period only). After each step it publishes the map: core's WorldMap
+//    hands out a tree that is never written again and its change set, without copying the map.
 #pragma once
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -15,6 +25,7 @@
 #include <thread>
 #include <vector>
 
+#include "fusion/core/sensor_periods.h"
 #include "fusion/core/world_map.h"
 #include "fusion/service/conversions.h"
 #include "fusion/service/ingest_queues.h"
@@ -25,9 +36,14 @@ namespace fusion::service {
 struct WorkerOptions {
   WorldMapOptions map;
   StateThresholds thresholds;
-  std::chrono::milliseconds render_interval{200};
-  // Nice value of the worker thread and its render threads (0: as the process).
+  // Shortest time between two renders of one sensor's open period (0: as soon as the renderer
+  // is free). Sealed periods are rendered at once.
+  std::chrono::milliseconds render_interval{0};
+  // Nice value of the worker's threads and its render threads (0: as the process).
   int nice = 10;
+  // Reliable ingest: instead of merging clouds while the renderer is behind, the integrator
+  // waits for it (the ingest queues then fill and DDS flow control slows the writers).
+  bool wait_for_renderer = false;
 };
 
 // One beam of a sensor's beam grid, for inspection.
@@ -44,56 +60,71 @@ enum class BeamLookup { kOk, kUnknownSensor, kBeamOutOfRange };
 
 class FusionWorker {
  public:
+  // Sealed periods a sensor may have waiting for the renderer before clouds are merged.
+  static constexpr std::size_t kMaxSealedPeriods = 2;
+
   FusionWorker(WorkerOptions options, std::vector<SensorSetup> sensors, IngestQueues* queues,
                SnapshotHub* hub);
   ~FusionWorker();
   FusionWorker(const FusionWorker&) = delete;
   FusionWorker& operator=(const FusionWorker&) = delete;
 
-  // `base` (may be null) is a map loaded from disk; publishes the first version and starts
-  // the thread.
-  bool Start(std::unique_ptr<octomap::OcTree> base, std::string* error);
-  // Integrates what is still queued, renders, publishes, stops the thread.
+  // `history` (may be null) is a map loaded from disk: the committed history to go on from.
+  // Publishes the first version and starts the threads.
+  bool Start(std::unique_ptr<octomap::OcTree> history, std::string* error);
+  // Integrates what is still queued, renders and commits everything, publishes, stops.
   void Stop();
 
-  // Clears the map, the base and every beam grid; returns the new version. Waits for the
-  // worker's current integration or render step.
+  // Clears the map and every beam grid; returns the new version. Waits for the current
+  // integration and render steps.
   std::uint64_t Reset();
-  // beam: an index, or row/col when std::nullopt.
+  // beam: an index, or row/col when std::nullopt. The open period's beam grid.
   BeamLookup InspectBeam(const std::string& sensor_id, std::optional<std::size_t> beam,
                          std::size_t row, std::size_t col, BeamInspection* out) const;
 
   [[nodiscard]] std::uint64_t renders() const { return renders_.load(); }
   [[nodiscard]] std::uint64_t integrated() const { return integrated_.load(); }
-  // Clouds integrated into the published map version (counted after it is published).
+  // Clouds whose evidence the published map holds (counted after it is published).
   [[nodiscard]] std::uint64_t in_map() const { return in_map_.load(); }
 
  private:
-  void Loop();
-  void IntegrateLocked(const Cloud& cloud);
-  void RenderAndPublishLocked();
-  void PublishLocked(std::vector<octomap::OcTreeKey> changed, bool reset);
-  void RebuildMapLocked();
-  // published_ = base fused with the live map, from scratch.
-  void RebuildPublishedLocked();
-  // Fused value of one key from base and live map; std::nullopt: no information.
-  std::optional<float> FusedLogOddsLocked(const octomap::OcTreeKey& key) const;
+  struct Lane;
+  struct Sealed {
+    Lane* lane;
+    std::unique_ptr<Period> period;
+  };
+
+  void IntegratorLoop();
+  void RendererLoop();
+  void Integrate(const Cloud& cloud);
+  // One renderer step (sealed period first, else an open period); false if there was nothing
+  // to do.
+  bool RenderStep();
+  void CommitSealed(Sealed sealed);
+  bool RenderOpen(Lane& lane);
+  void PublishLocked();
+  Lane* LaneOf(const std::string& sensor_id) const;
 
   WorkerOptions options_;
+  RenderOptions render_options_;
   std::vector<SensorSetup> sensors_;
   IngestQueues* queues_;
   SnapshotHub* hub_;
+  std::vector<std::unique_ptr<Lane>> lanes_;
 
-  mutable std::mutex map_mutex_;  // guards everything below
+  std::mutex map_mutex_;  // the renderer's steps, Reset; guards map_
   std::unique_ptr<WorldMap> map_;
-  std::unique_ptr<octomap::OcTree> base_;
-  std::unique_ptr<octomap::OcTree> published_;
-  std::uint64_t version_offset_ = 0;
-  std::uint64_t rendered_map_version_ = 0;
-  bool dirty_ = false;
+  std::uint64_t published_version_ = 0;
+
+  std::mutex work_mutex_;  // guards sealed_ and the wake-up of the renderer
+  std::condition_variable work_cv_;
+  std::condition_variable room_cv_;  // a sealed period was committed
+  std::deque<Sealed> sealed_;
+  bool integrator_done_ = false;
 
   std::atomic<bool> stop_{false};
-  std::thread thread_;
+  std::thread integrator_;
+  std::thread renderer_;
   std::atomic<std::uint64_t> renders_{0};
   std::atomic<std::uint64_t> integrated_{0};
   std::atomic<std::uint64_t> in_map_{0};

@@ -32,6 +32,8 @@ struct SensorCountersAtomic {
   std::atomic<std::uint64_t> received{0};  // valid clouds queued
   std::atomic<std::uint64_t> dropped{0};   // replaced by a newer cloud before integration
   std::atomic<std::uint64_t> integrated{0};
+  std::atomic<std::uint64_t> merged{0};    // integrated into an open period from beyond its pose
+                                           // tolerance (the renderer was behind)
   std::atomic<std::uint64_t> points_updated{0};
   std::atomic<std::uint64_t> points_beyond_range{0};
   std::atomic<std::uint64_t> points_missing{0};

@@ -14,6 +14,8 @@
 #include <thread>
 #include <vector>
 
+#include "fusion/core/change_log.h"
+
 namespace fusion::service {
 
 struct MapSnapshot {
@@ -23,23 +25,22 @@ struct MapSnapshot {
 
 class SnapshotHub {
  public:
-  // Bounds of the change log: older entries are forgotten (subscribers then get the full map).
-  static constexpr std::size_t kDefaultMaxLoggedKeys = 4'000'000;
+  // Bound of the change log: older versions are forgotten (subscribers then get the full map).
+  static constexpr std::size_t kDefaultMaxLoggedRegions = 4'000'000;
   // Until the first Publish, Current() is an empty map of resolution_m.
-  explicit SnapshotHub(std::size_t max_logged_keys = kDefaultMaxLoggedKeys,
+  explicit SnapshotHub(std::size_t max_logged_regions = kDefaultMaxLoggedRegions,
                        double resolution_m = 0.05);
   ~SnapshotHub();
   SnapshotHub(const SnapshotHub&) = delete;
   SnapshotHub& operator=(const SnapshotHub&) = delete;
 
   [[nodiscard]] std::shared_ptr<const MapSnapshot> Current() const;
-  // Publishes a new version. `changed` are the keys whose value changed since the previous
-  // version; `reset` says the previous versions are gone (log cleared).
-  void Publish(std::shared_ptr<const MapSnapshot> snapshot, std::vector<octomap::OcTreeKey> changed,
-               bool reset);
-  // Keys changed after `since` up to the current version (deduplicated). False if the log
-  // does not reach back to `since` (the caller then sends the whole map).
-  bool ChangedSince(std::uint64_t since, std::vector<octomap::OcTreeKey>* keys) const;
+  // Publishes a new version with what it changed (changes.version == snapshot->version;
+  // changes.reset: the previous versions are gone).
+  void Publish(std::shared_ptr<const MapSnapshot> snapshot, MapChanges changes);
+  // Regions changed after `since` up to the current version (ChangeLog::Since). False if the
+  // log does not reach back to `since` (the caller then sends the whole map).
+  bool ChangedSince(std::uint64_t since, std::vector<MapRegion>* regions) const;
 
   // Subscribers are called on the hub's own notifier thread, so that the publisher (the fusion
   // worker) never waits for them: at least once after every Publish (several publishes in
@@ -59,15 +60,7 @@ class SnapshotHub {
 
   mutable std::mutex mutex_;
   std::shared_ptr<const MapSnapshot> current_;
-  std::shared_ptr<const MapSnapshot> retired_;  // the version before current_ (see Publish)
-  struct LogEntry {
-    std::uint64_t version;
-    std::vector<octomap::OcTreeKey> keys;
-  };
-  std::deque<LogEntry> log_;
-  std::uint64_t log_start_version_ = 0;  // versions after this are fully logged
-  std::size_t logged_keys_ = 0;
-  std::size_t max_logged_keys_;
+  ChangeLog log_;
   bool closed_ = false;
 
   std::mutex subscribers_mutex_;  // held while calling subscribers

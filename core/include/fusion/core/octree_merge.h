@@ -1,0 +1,68 @@
+// Writing multi-resolution contributions into an OctoMap tree, region by region: the one way the
+// fused map, the committed history and the published copies of the map are changed.
+//
+// A region is an octree node (Morton code of its first voxel and depth, 16 = one voxel). The tree
+// keeps OctoMap's own invariants after every merge: an inner node holds the maximum of its
+// children (as OcTree::updateInnerOccupancy), a node whose eight children are leaves of one
+// value is pruned into a leaf of that value (as OcTree::prune), and no inner node is left
+// without children. So a uniform block, such as free space decided whole by the projective
+// render, is one coarse leaf, exactly as OctoMap's pruning represents it, and every OcTree
+// reader (search, iterators, castRay, .ot / .bt writers) reads it correctly.
+#pragma once
+
+#include <octomap/OcTree.h>
+
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "fusion/core/fusion_rules.h"
+#include "fusion/core/rendered_grid.h"
+
+namespace fusion {
+
+struct MapRegion {
+  std::uint64_t code = 0;
+  std::uint8_t depth = kTreeDepth;
+  friend bool operator==(const MapRegion& a, const MapRegion& b) {
+    return a.code == b.code && a.depth == b.depth;
+  }
+};
+
+// An opinion about the map: a tree (log-odds per leaf) or a rendered grid; where it has no node
+// it has no opinion.
+struct MergeSource {
+  const octomap::OcTree* tree = nullptr;
+  const RenderedGrid* grid = nullptr;
+};
+
+// target := policy.Fuse(opinions of the sources) in every region where some driver has a node
+// (sources without an opinion left out; none at all: the region is removed). Regions no driver
+// touches keep what they hold. Sources and target must share the resolution; the target may
+// be one of the sources. Appends the regions whose value changed (removed included) in Morton
+// order to *changed, if not null.
+void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
+                 const std::vector<MergeSource>& sources,
+                 const std::vector<const RenderedGrid*>& drivers,
+                 std::vector<MapRegion>* changed = nullptr);
+
+// target := source in the given regions (ascending codes, disjoint): what source holds there,
+// nothing where it holds nothing.
+void CopyRegions(octomap::OcTree& target, const octomap::OcTree& source,
+                 const std::vector<MapRegion>& regions);
+
+// Removes the full-depth voxel `key` from `tree` (splits a pruned node holding it); false if no
+// node holds it. Every other voxel keeps its value.
+bool DeleteVoxel(octomap::OcTree& tree, const octomap::OcTreeKey& key);
+
+// What `tree` holds in `region`, piece by piece, depth first: f(key, depth, node) for every leaf
+// inside the region; the region itself with the leaf that holds it if that leaf is coarser; the
+// region with a null node if the tree holds nothing there. Keys are OctoMap's (node centre).
+void ForEachInRegion(
+    const octomap::OcTree& tree, const MapRegion& region,
+    const std::function<void(const octomap::OcTreeKey&, unsigned, const octomap::OcTreeNode*)>& f);
+
+// Regions sorted by code, with every region that lies inside an earlier one dropped.
+void NormaliseRegions(std::vector<MapRegion>* regions);
+
+}  // namespace fusion

@@ -1,0 +1,86 @@
+// The integration side of a sensor's map life cycle (DESIGN.md, "Map life cycle"): clouds
+// accumulate in the beam grid of the sensor's open period while its pose stays within a
+// tolerance of the pose the period started at; a cloud from beyond it seals the period (which
+// is then rendered and committed into the map) and opens a new one at its own pose.
+//
+// A caller that cannot render as fast as periods are sealed may refuse to seal: the cloud is
+// then merged into the open period, its points moved into the period's sensor frame
+// (T_period^-1 T_cloud), so no evidence is thrown away; only the rays' origin is approximated.
+//
+// Thread-compatible: one thread integrates; a sealed period is handed over whole.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "fusion/core/beam_grid.h"
+#include "fusion/core/sensor.h"
+
+namespace fusion {
+
+enum class MapStatus {
+  kOk,
+  kUnknownSensor,
+  kDuplicateSensor,
+  kInvalidPose,      // non-finite translation or a non-rotation matrix
+  kInvalidArgument,  // e.g. null points with a non-zero count
+};
+[[nodiscard]] const char* MapStatusName(MapStatus status);
+
+// True if T is finite and its linear part a rotation (within 1e-3).
+[[nodiscard]] bool ValidPose(const Eigen::Isometry3d& T);
+
+struct Period {
+  std::unique_ptr<BeamGrid> grid;
+  Eigen::Isometry3d T_world_sensor = Eigen::Isometry3d::Identity();
+  std::uint64_t frames = 0;         // clouds integrated
+  std::uint64_t merged_frames = 0;  // of those, taken from outside the tolerance
+  std::uint64_t sequence = 0;       // periods of the sensor are numbered from 1
+};
+
+struct PeriodIntegration {
+  IntegrationStats stats;
+  bool merged = false;  // the pose left the tolerance, the cloud went into the open period
+};
+
+class SensorPeriods {
+ public:
+  SensorPeriods(const SensorSpec& spec, const BeamGridOptions& grid_options,
+                double pose_tolerance_m, double pose_tolerance_rad);
+
+  // Applies one cloud (sensor frame, 3 floats per point; beyond_range as BeamGrid::Integrate)
+  // taken at T_world_sensor. If the pose left the tolerance of a non-empty open period and
+  // may_seal, that period is moved to *sealed and a new one opened; without may_seal the cloud
+  // is merged. Statuses for a bad pose or bad arguments (nothing is touched then).
+  MapStatus Integrate(const Eigen::Isometry3d& T_world_sensor, const float* points_xyz,
+                      std::size_t point_count, const std::vector<std::uint8_t>& beyond_range,
+                      bool may_seal, PeriodIntegration* result, std::unique_ptr<Period>* sealed);
+
+  // The open period (frames == 0: nothing integrated since it opened).
+  [[nodiscard]] const Period& open() const { return *open_; }
+  // Seals the open period now (std::nullptr if it is empty) and opens an empty one.
+  [[nodiscard]] std::unique_ptr<Period> Seal();
+  // Gives back a sealed period whose grid is no longer needed: its memory is reused.
+  void Recycle(std::unique_ptr<Period> period);
+  // Empties the open period (a map reset).
+  void Reset();
+  [[nodiscard]] const SensorSpec& spec() const { return spec_; }
+  [[nodiscard]] std::size_t MemoryBytes() const;
+
+ private:
+  [[nodiscard]] bool Moved(const Eigen::Isometry3d& T_world_sensor) const;
+  std::unique_ptr<Period> NewPeriod();
+
+  SensorSpec spec_;
+  BeamGridOptions grid_options_;
+  double pose_tolerance_m_;
+  double pose_tolerance_rad_;
+  std::unique_ptr<Period> open_;
+  std::unique_ptr<Period> spare_;  // a recycled period, grid reset
+  std::uint64_t sequence_ = 0;
+  std::vector<float> moved_;  // points of a merged cloud in the open period's frame
+};
+
+}  // namespace fusion

@@ -1,0 +1,399 @@
+#include "fusion/core/projective_render.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "beam_trace.h"
+
+namespace fusion {
+namespace {
+
+constexpr int kTreeMaxVal = 32768;  // octomap tree_max_val for depth 16
+constexpr float kInf = std::numeric_limits<float>::infinity();
+// Rectangles of at most this many beams are read beam by beam, larger ones from the pyramid.
+constexpr int kExactBeams = 32;
+// Float rounding of the lattice's tangents, covered by widening every box by this.
+constexpr double kTanEps = 1e-5;
+
+double Square(double v) { return v * v; }
+
+// What the pyramid keeps of a set of beams (one beam at level 0).
+struct Aggregate {
+  float min_free_end = kInf;   // nearest end of a free zone (m)
+  float max_free_end = -kInf;  // farthest end of a free zone
+  float max_far = -kInf;       // no voxel traced by (or in the oracle, crossed by) a ray of these
+                               // beams starts at or beyond this range
+  float max_free_value = -kInf;  // strongest (least negative) free-zone evidence
+  std::uint32_t touched = 0;
+  std::uint32_t beams = 0;
+
+  void Add(const Aggregate& o) {
+    min_free_end = std::min(min_free_end, o.min_free_end);
+    max_free_end = std::max(max_free_end, o.max_free_end);
+    max_far = std::max(max_far, o.max_far);
+    max_free_value = std::max(max_free_value, o.max_free_value);
+    touched += o.touched;
+    beams += o.beams;
+  }
+};
+
+// Min / max images of the beam grid, halved level by level: a rectangle of beams is answered
+// from at most 2 x 2 cells of the level where its larger side fits one cell.
+class BeamPyramid {
+ public:
+  BeamPyramid(int cols, int rows, std::vector<Aggregate> beams) {
+    levels_.push_back({cols, rows, std::move(beams)});
+    while (levels_.back().cols > 1 || levels_.back().rows > 1) {
+      const Level& below = levels_.back();
+      Level up{(below.cols + 1) / 2, (below.rows + 1) / 2, {}};
+      up.cells.resize(static_cast<std::size_t>(up.cols) * up.rows);
+      for (int r = 0; r < below.rows; ++r) {
+        for (int c = 0; c < below.cols; ++c) {
+          up.cells[static_cast<std::size_t>(r / 2) * up.cols + c / 2].Add(
+              below.cells[static_cast<std::size_t>(r) * below.cols + c]);
+        }
+      }
+      levels_.push_back(std::move(up));
+    }
+  }
+
+  // Beams of columns [c0, c1] and rows [r0, r1] (a superset, for large rectangles).
+  [[nodiscard]] Aggregate Query(int c0, int c1, int r0, int r1) const {
+    Aggregate out;
+    const int w = c1 - c0 + 1;
+    const int h = r1 - r0 + 1;
+    std::size_t l = 0;
+    if (w * h > kExactBeams) {
+      while ((1 << l) < std::max(w, h)) ++l;
+      l = std::min(l, levels_.size() - 1);
+    }
+    const Level& level = levels_[l];
+    for (int r = r0 >> l; r <= (r1 >> l); ++r) {
+      for (int c = c0 >> l; c <= (c1 >> l); ++c) {
+        out.Add(level.cells[static_cast<std::size_t>(r) * level.cols + c]);
+      }
+    }
+    return out;
+  }
+
+ private:
+  struct Level {
+    int cols;
+    int rows;
+    std::vector<Aggregate> cells;
+  };
+  std::vector<Level> levels_;
+};
+
+// The top-down visit of the octree. A block whose beams (the pyramid's superset of them) are
+// all touched and free through it, but which is not wholly inside the field of view or beyond
+// r_min, passes that verdict down: its parts are then decided by geometry alone.
+class Descent {
+ public:
+  Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+          const RenderOptions& options, const BeamPyramid& pyramid, const LocalGrid& traced,
+          double t_start, float global_far, RenderedGrid* out, RenderStats* stats)
+      : tess_(grid.tessellation()),
+        options_(options),
+        pyramid_(pyramid),
+        traced_(traced),
+        Rt_(T_world_sensor.linear().transpose()),
+        origin_(T_world_sensor.translation()),
+        t_start_(t_start),
+        global_far_(global_far),
+        out_(out),
+        stats_(stats) {
+    // Known space ends at the centre lines of the outermost beams, as the rays of the
+    // ray-traced render do.
+    const double half_w = 0.5 * tess_.beam_width_h_rad();
+    const double half_h = 0.5 * tess_.beam_width_v_rad();
+    az_min_ = std::tan(std::atan(tess_.TanAzimuthMin()) + half_w);
+    az_max_ = std::tan(std::atan(tess_.TanAzimuthMax()) - half_w);
+    el_min_ = std::tan(std::atan(tess_.TanElevationMin()) + half_h);
+    el_max_ = std::tan(std::atan(tess_.TanElevationMax()) - half_h);
+    // Every direction of the field of view has z >= cone_ * |p| (its corners lean the most).
+    const double ta = std::max(std::abs(tess_.TanAzimuthMin()), std::abs(tess_.TanAzimuthMax()));
+    const double te = std::max(std::abs(tess_.TanElevationMin()), std::abs(tess_.TanElevationMax()));
+    cone2_ = 1.0 / (1.0 + ta * ta + te * te * (1.0 + ta * ta));
+    t_start2_ = t_start_ * t_start_;
+    global_far2_ = Square(global_far_);
+  }
+
+  // Visits the children of a block that is neither wholly free nor wholly unknown.
+  void VisitChildren(unsigned depth, const std::array<int, 3>& key_min,
+                     const Aggregate* free_through) {
+    const unsigned child_depth = depth + 1;
+    const int half = 1 << (kTreeDepth - child_depth);
+    const double res = options_.resolution_m;
+    const double child_size = res * half;
+    Eigen::Vector3d lo;
+    for (int a = 0; a < 3; ++a) lo[a] = (key_min[a] - kTreeMaxVal) * res;
+    // Corners of the eight children: a 3 x 3 x 3 lattice, its angles in the sensor frame, in
+    // floats so that the loop below runs on vectors (the margins cover the rounding).
+    const Eigen::Vector3d base = Rt_ * (lo - origin_);
+    const Eigen::Matrix3d step = Rt_ * child_size;
+    // Azimuth tangent x / z and the elevation tangent's signed square y |y| / (x^2 + z^2) (no
+    // square root), four lattice points at a time.
+    alignas(16) float px[28], py[28], pz[28], az[28], el[28];
+    for (int n = 0; n < 27; ++n) {
+      const int i = n % 3, j = (n / 3) % 3, k = n / 9;
+      const Eigen::Vector3d p = base + step.col(0) * i + step.col(1) * j + step.col(2) * k;
+      px[n] = static_cast<float>(p.x());
+      py[n] = static_cast<float>(p.y());
+      pz[n] = static_cast<float>(p.z());
+    }
+    px[27] = py[27] = 0.0f;
+    pz[27] = 1.0f;
+    using F4 = float __attribute__((vector_size(16)));
+    const F4 tiny = {1e-6f, 1e-6f, 1e-6f, 1e-6f};
+    const F4 one = {1.0f, 1.0f, 1.0f, 1.0f};
+    for (int n = 0; n < 28; n += 4) {
+      F4 x, y, z;
+      std::memcpy(&x, px + n, sizeof x);
+      std::memcpy(&y, py + n, sizeof y);
+      std::memcpy(&z, pz + n, sizeof z);
+      z = z > tiny ? z : one;
+      const F4 a = x / z;
+      const F4 ny = -y;
+      const F4 e = ny * (ny < 0 ? -ny : ny) / (x * x + z * z);
+      std::memcpy(az + n, &a, sizeof a);
+      std::memcpy(el + n, &e, sizeof e);
+    }
+    // Per axis, the offsets of the two child slabs from the sensor: their nearest and farthest
+    // squared distances.
+    double near2[3][2], far2[3][2];
+    for (int a = 0; a < 3; ++a) {
+      for (int c = 0; c < 2; ++c) {
+        const double l = lo[a] + c * child_size - origin_[a];
+        const double h = l + child_size;
+        const double n = l > 0.0 ? l : (h < 0.0 ? -h : 0.0);
+        const double f = std::max(std::abs(l), std::abs(h));
+        near2[a][c] = n * n;
+        far2[a][c] = f * f;
+      }
+    }
+    for (int child = 0; child < 8; ++child) {
+      const int cx = child & 1, cy = (child >> 1) & 1, cz = (child >> 2) & 1;
+      Box box;
+      box.size = child_size;
+      box.r_lo2 = near2[0][cx] + near2[1][cy] + near2[2][cz];
+      box.r_hi2 = far2[0][cx] + far2[1][cy] + far2[2][cz];
+      if (box.r_hi2 <= t_start2_ || box.r_lo2 >= global_far2_) continue;
+      float az_lo = std::numeric_limits<float>::infinity(), az_hi = -az_lo;
+      float el_lo = az_lo, el_hi = -az_lo, z_max = -az_lo, z_min = az_lo;
+      for (int corner = 0; corner < 8; ++corner) {
+        const int n = (cx + (corner & 1)) + 3 * (cy + ((corner >> 1) & 1)) + 9 * (cz + (corner >> 2));
+        z_max = std::max(z_max, pz[n]);
+        z_min = std::min(z_min, pz[n]);
+        az_lo = std::min(az_lo, az[n]);
+        az_hi = std::max(az_hi, az[n]);
+        el_lo = std::min(el_lo, el[n]);
+        el_hi = std::max(el_hi, el[n]);
+      }
+      box.z_max = z_max;
+      box.ahead = z_min > 1e-6f;
+      box.az_lo = az_lo - kTanEps;
+      box.az_hi = az_hi + kTanEps;
+      box.el_lo = std::copysign(std::sqrt(std::abs(el_lo)), el_lo) - kTanEps;
+      box.el_hi = std::copysign(std::sqrt(std::abs(el_hi)), el_hi) + kTanEps;
+      const std::array<int, 3> k = {key_min[0] + cx * half, key_min[1] + cy * half,
+                                    key_min[2] + cz * half};
+      const Verdict v = Classify(child_depth, box, free_through);
+      if (v.kind == Kind::kUnknown) continue;
+      if (v.kind == Kind::kFree) {
+        Emit(child_depth, k, v.free_value);
+      } else if (child_depth == kTreeDepth) {
+        VisitVoxel(k, box, v);
+      } else {
+        VisitChildren(child_depth, k, v.free_through ? &v.beams : nullptr);
+      }
+    }
+  }
+
+ private:
+  enum class Kind { kUnknown, kFree, kMixed };
+  struct Box {
+    double size = 0.0;
+    double r_lo2 = 0.0;  // squared distance of the nearest point to the sensor
+    double r_hi2 = 0.0;  // squared distance of the farthest corner
+    bool ahead = false;  // every corner in front of the sensor
+    double z_max = 0.0;  // along the optical axis
+    double az_lo = 0.0, az_hi = 0.0, el_lo = 0.0, el_hi = 0.0;  // tangents over the corners
+  };
+  struct Verdict {
+    Kind kind = Kind::kUnknown;
+    float free_value = 0.0f;
+    bool free_through = false;  // mixed only by geometry: every beam is free through the box
+    Aggregate beams;
+  };
+
+  Verdict Classify(unsigned depth, Box& box, const Aggregate* free_through) const {
+    Verdict v;
+    const bool voxel = depth == kTreeDepth;
+    // Outside the cone that holds the field of view.
+    if (box.z_max < 0.0 || box.z_max * box.z_max < cone2_ * box.r_lo2) return v;
+    // Near the sensor (or behind its image plane) the corners do not bound the angles.
+    if (box.r_lo2 < 4.0 * box.size * box.size || !box.ahead) {
+      if (!voxel) v.kind = Kind::kMixed;
+      return v;
+    }
+    // Exact for azimuth (x / z is linear fractional: its extremes are at corners); the
+    // elevation tangent may peak inside a face, by at most size^2 / (2 r_lo^2) radians.
+    const double margin = box.size * box.size / (2.0 * box.r_lo2);
+    box.el_lo -= margin * (1.0 + box.el_lo * box.el_lo);
+    box.el_hi += margin * (1.0 + box.el_hi * box.el_hi);
+    if (box.az_hi < az_min_ || box.az_lo > az_max_ || box.el_hi < el_min_ ||
+        box.el_lo > el_max_) {
+      return v;
+    }
+    const bool in_fov = box.az_lo >= az_min_ && box.az_hi <= az_max_ && box.el_lo >= el_min_ &&
+                        box.el_hi <= el_max_;
+    if (free_through != nullptr) {
+      v.beams = *free_through;
+    } else {
+      v.beams = pyramid_.Query(tess_.ColumnOfTangent(box.az_lo), tess_.ColumnOfTangent(box.az_hi),
+                               tess_.RowOfTangent(box.el_hi), tess_.RowOfTangent(box.el_lo));
+      if (v.beams.touched == 0 || box.r_lo2 >= Square(v.beams.max_far)) return v;
+    }
+    const bool all_free =
+        v.beams.touched == v.beams.beams && box.r_hi2 <= Square(v.beams.min_free_end);
+    if (all_free && ((in_fov && box.r_lo2 >= t_start2_) || voxel)) {
+      v.kind = Kind::kFree;
+      v.free_value = v.beams.max_free_value;
+      return v;
+    }
+    v.kind = Kind::kMixed;
+    v.free_through = all_free;
+    return v;
+  }
+
+  // A voxel the pyramid could not decide: its traced value if a ray crossed it in a beam's
+  // mass, else free if some beam's free zone reaches into it, else unknown.
+  void VisitVoxel(const std::array<int, 3>& key_min, const Box& box, const Verdict& v) {
+    const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
+                                 static_cast<octomap::key_type>(key_min[1]),
+                                 static_cast<octomap::key_type>(key_min[2]));
+    if (const auto traced = traced_.LogOddsOf(key)) {
+      Emit(kTreeDepth, key_min, static_cast<float>(*traced));
+    } else if (box.r_lo2 < Square(v.beams.max_free_end)) {
+      Emit(kTreeDepth, key_min, v.beams.max_free_value);
+    }
+  }
+
+  void Emit(unsigned depth, const std::array<int, 3>& key_min, float value) {
+    const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
+                                 static_cast<octomap::key_type>(key_min[1]),
+                                 static_cast<octomap::key_type>(key_min[2]));
+    out_->Append({MortonOf(key), value, static_cast<std::uint8_t>(depth)});
+    if (depth == kTreeDepth) {
+      ++stats_->fine_voxels;
+    } else {
+      ++stats_->coarse_nodes;
+    }
+  }
+
+  const BeamTessellation& tess_;
+  const RenderOptions& options_;
+  const BeamPyramid& pyramid_;
+  const LocalGrid& traced_;
+  Eigen::Matrix3d Rt_;
+  Eigen::Vector3d origin_;
+  double t_start_;
+  double global_far_;
+  RenderedGrid* out_;
+  RenderStats* stats_;
+  double az_min_ = 0.0, az_max_ = 0.0, el_min_ = 0.0, el_max_ = 0.0;
+  double cone2_ = 0.0;  // squared
+  double t_start2_ = 0.0;
+  double global_far2_ = 0.0;
+};
+
+}  // namespace
+
+RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                              const RenderOptions& options, RenderStats* stats) {
+  const BeamTessellation& tess = grid.tessellation();
+  if (!tess.HasTangentEdges()) {
+    return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
+  }
+  const auto rows = static_cast<std::size_t>(tess.rows());
+  const auto cols = static_cast<std::size_t>(tess.cols());
+  const std::size_t workers = detail::RowWorkers(rows, options.threads);
+  std::vector<LocalGrid> parts(workers, LocalGrid(options.resolution_m, options.combine));
+  std::vector<RenderStats> part_stats(workers);
+  std::vector<Aggregate> beams(grid.beam_count());
+  double t_start = 0.0;
+  const float clamp = static_cast<float>(options.max_abs_log_odds);
+  // Each beam's free zone and mass, its rays traced through the mass.
+  detail::ForEachRowBlock(rows, workers, [&](std::size_t t, const std::vector<std::size_t>& mine) {
+    detail::BeamTracer tracer(grid, T_world_sensor, options);
+    if (t == 0) t_start = tracer.t_start();
+    std::vector<detail::Segment> segments;
+    RenderStats& s = part_stats[t];
+    parts[t].Reserve(mine.size() * cols);
+    for (const std::size_t row : mine) {
+      for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
+        Aggregate& a = beams[b];
+        a.beams = 1;
+        if (!grid.Touched(b)) {
+          ++s.beams_untouched;
+          continue;
+        }
+        ++s.beams_rendered;
+        const BeamProfile p =
+            grid.Profile(b, tracer.t_start(), options.tail_mass, options.free_ratio);
+        const double free_end = std::min(p.mass_begin_m, tracer.t_end());
+        double far = free_end;
+        segments.clear();
+        if (free_end < tracer.t_end()) {
+          s.rays_traced += tracer.TraceBeam(b, free_end, &segments, p.info_end_m);
+        }
+        for (const auto& seg : segments) {
+          far = std::max(far, seg.t_out_m);
+          parts[t].AddEvidence(seg.key, seg.evidence, seg.weight);
+        }
+        s.segments += segments.size();
+        a.touched = 1;
+        a.min_free_end = a.max_free_end = static_cast<float>(free_end);
+        a.max_far = static_cast<float>(far);
+        a.max_free_value = std::isfinite(p.free_log_odds)
+                               ? std::clamp(static_cast<float>(p.free_log_odds), -clamp, clamp)
+                               : -clamp;
+      }
+    }
+  });
+  LocalGrid traced = std::move(parts[0]);
+  RenderStats s = part_stats[0];
+  for (std::size_t t = 1; t < workers; ++t) {
+    traced.Merge(parts[t]);
+    s.beams_rendered += part_stats[t].beams_rendered;
+    s.beams_untouched += part_stats[t].beams_untouched;
+    s.rays_traced += part_stats[t].rays_traced;
+    s.segments += part_stats[t].segments;
+  }
+  s.voxels = traced.size();
+  float global_far = -kInf;
+  for (const Aggregate& a : beams) global_far = std::max(global_far, a.max_far);
+  const BeamPyramid pyramid(tess.cols(), tess.rows(), std::move(beams));
+  RenderedGrid out(options.resolution_m);
+  if (s.beams_rendered > 0) {
+    Descent descent(grid, T_world_sensor, options, pyramid, traced, t_start, global_far, &out, &s);
+    descent.VisitChildren(0, {0, 0, 0}, nullptr);
+  }
+  if (stats != nullptr) *stats = s;
+  return out;
+}
+
+RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                    const RenderOptions& options, RenderStats* stats) {
+  if (options.method == RenderMethod::kRayTraced) {
+    return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
+  }
+  return RenderProjective(grid, T_world_sensor, options, stats);
+}
+
+}  // namespace fusion

@@ -1,0 +1,119 @@
+#include "fusion/core/sensor_periods.h"
+
+#include <cmath>
+
+namespace fusion {
+
+const char* MapStatusName(MapStatus status) {
+  switch (status) {
+    case MapStatus::kOk:
+      return "ok";
+    case MapStatus::kUnknownSensor:
+      return "unknown sensor";
+    case MapStatus::kDuplicateSensor:
+      return "duplicate sensor";
+    case MapStatus::kInvalidPose:
+      return "invalid pose";
+    case MapStatus::kInvalidArgument:
+      return "invalid argument";
+  }
+  return "unknown status";
+}
+
+bool ValidPose(const Eigen::Isometry3d& T) {
+  if (!T.matrix().allFinite()) return false;
+  const Eigen::Matrix3d R = T.linear();
+  if ((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3) return false;
+  return R.determinant() > 0.0;
+}
+
+SensorPeriods::SensorPeriods(const SensorSpec& spec, const BeamGridOptions& grid_options,
+                             double pose_tolerance_m, double pose_tolerance_rad)
+    : spec_(spec),
+      grid_options_(grid_options),
+      pose_tolerance_m_(pose_tolerance_m),
+      pose_tolerance_rad_(pose_tolerance_rad) {
+  open_ = NewPeriod();
+}
+
+std::unique_ptr<Period> SensorPeriods::NewPeriod() {
+  std::unique_ptr<Period> p;
+  if (spare_) {
+    p = std::move(spare_);
+    p->frames = p->merged_frames = 0;
+  } else {
+    p = std::make_unique<Period>();
+    p->grid = std::make_unique<BeamGrid>(spec_, grid_options_);
+  }
+  p->sequence = ++sequence_;
+  return p;
+}
+
+bool SensorPeriods::Moved(const Eigen::Isometry3d& T_world_sensor) const {
+  const double translation_m =
+      (T_world_sensor.translation() - open_->T_world_sensor.translation()).norm();
+  const Eigen::AngleAxisd delta(open_->T_world_sensor.linear().transpose() *
+                                T_world_sensor.linear());
+  return translation_m > pose_tolerance_m_ || std::abs(delta.angle()) > pose_tolerance_rad_;
+}
+
+MapStatus SensorPeriods::Integrate(const Eigen::Isometry3d& T_world_sensor,
+                                   const float* points_xyz, std::size_t point_count,
+                                   const std::vector<std::uint8_t>& beyond_range, bool may_seal,
+                                   PeriodIntegration* result, std::unique_ptr<Period>* sealed) {
+  if (!ValidPose(T_world_sensor)) return MapStatus::kInvalidPose;
+  if (points_xyz == nullptr && point_count != 0) return MapStatus::kInvalidArgument;
+  if (!beyond_range.empty() && beyond_range.size() != point_count) {
+    return MapStatus::kInvalidArgument;
+  }
+  PeriodIntegration out;
+  const float* points = points_xyz;
+  if (open_->frames > 0 && Moved(T_world_sensor)) {
+    if (may_seal) {
+      *sealed = std::move(open_);
+      open_ = NewPeriod();
+    } else {
+      // Into the open period's frame; NaN stays NaN (no return), so does every count.
+      const Eigen::Isometry3d T_open_cloud = open_->T_world_sensor.inverse() * T_world_sensor;
+      moved_.resize(3 * point_count);
+      for (std::size_t k = 0; k < point_count; ++k) {
+        const Eigen::Vector3d p(points_xyz[3 * k], points_xyz[3 * k + 1], points_xyz[3 * k + 2]);
+        const Eigen::Vector3d q = T_open_cloud * p;
+        const bool zero = p.x() == 0.0 && p.y() == 0.0 && p.z() == 0.0;  // "missing" stays so
+        for (int a = 0; a < 3; ++a) moved_[3 * k + a] = zero ? 0.0f : static_cast<float>(q[a]);
+      }
+      points = moved_.data();
+      out.merged = true;
+      ++open_->merged_frames;
+    }
+  }
+  if (open_->frames == 0) open_->T_world_sensor = T_world_sensor;
+  out.stats = open_->grid->Integrate(points, point_count, beyond_range);
+  ++open_->frames;
+  if (result != nullptr) *result = out;
+  return MapStatus::kOk;
+}
+
+std::unique_ptr<Period> SensorPeriods::Seal() {
+  if (open_->frames == 0) return nullptr;
+  std::unique_ptr<Period> sealed = std::move(open_);
+  open_ = NewPeriod();
+  return sealed;
+}
+
+void SensorPeriods::Recycle(std::unique_ptr<Period> period) {
+  if (!period || spare_) return;
+  period->grid->Reset();
+  spare_ = std::move(period);
+}
+
+void SensorPeriods::Reset() {
+  open_->grid->Reset();
+  open_->frames = open_->merged_frames = 0;
+}
+
+std::size_t SensorPeriods::MemoryBytes() const {
+  return open_->grid->MemoryBytes() + (spare_ ? spare_->grid->MemoryBytes() : 0);
+}
+
+}  // namespace fusion
