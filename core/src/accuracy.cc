@@ -47,6 +47,7 @@ AccuracyReport EvaluateMap(const octomap::OcTree& map, const VoxelLabels& labels
   // Predicted occupied voxels anywhere in the map (inside the region).
   double error_sum = 0.0;
   const double res = map.getResolution();
+  const double holds_surface_m = 0.5 * std::sqrt(3.0) * res;  // within the voxel's half diagonal
   for (auto it = map.begin_leafs(), end = map.end_leafs(); it != end; ++it) {
     if (it->getOccupancy() <= options.occupied_threshold) continue;
     const int cells = std::max(1, static_cast<int>(std::lround(it.getSize() / res)));
@@ -60,6 +61,11 @@ AccuracyReport EvaluateMap(const octomap::OcTree& map, const VoxelLabels& labels
           if (!in_region(c)) continue;
           ++r.predicted_occupied;
           const double e = surface_distance(c);
+          const auto label = labels.labels.find(map.coordToKey(c.x(), c.y(), c.z()));
+          const bool labelled = label != labels.labels.end();
+          if ((labelled && label->second) || (!labelled && e <= holds_surface_m)) {
+            ++r.predicted_holding_surface;
+          }
           error_sum += e;
           r.max_surface_error_m = std::max(r.max_surface_error_m, e);
         }
@@ -68,6 +74,9 @@ AccuracyReport EvaluateMap(const octomap::OcTree& map, const VoxelLabels& labels
   }
   r.precision =
       r.predicted_occupied > 0 ? static_cast<double>(r.true_positives) / r.predicted_occupied : 0.0;
+  r.surface_precision = r.predicted_occupied > 0
+                            ? static_cast<double>(r.predicted_holding_surface) / r.predicted_occupied
+                            : 0.0;
   r.recall =
       r.labelled_occupied > 0 ? static_cast<double>(r.true_positives) / r.labelled_occupied : 0.0;
   r.free_accuracy = r.labelled_free > 0 ? static_cast<double>(free_correct) / r.labelled_free : 0.0;

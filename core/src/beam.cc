@@ -203,6 +203,7 @@ BeamProfileCells DenseBeam::Profile(const BeamContext& ctx, std::uint32_t from,
   while (c < n && tail[c] > no_information && p_[c] <= free_ratio * ctx.prior() * tail[c]) ++c;
   out.mass_begin = static_cast<std::uint32_t>(c < n ? c : n + 1);
   out.free_hazard = tail[start] > 0.0 && c > start ? -std::log(tail[c] / tail[start]) : 0.0;
+  out.median = TailDropCell(ctx, from, 0.5);
   return out;
 }
 
@@ -508,11 +509,11 @@ BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from,
   out.free_hazard =
       s_start > 0.0 && out.mass_begin > start ? -std::log(std::max(s_end, 0.0) / s_start) : 0.0;
   if (!std::isfinite(out.free_hazard)) out.free_hazard = 0.0;
-  // Information end (TailDropCell): the composite where S falls below the threshold, then the
-  // cell inside it.
-  const double threshold = tail_fraction * s_start;
-  out.info_end = static_cast<std::uint32_t>(n + 1);
-  if (!(w_all_free_ >= threshold)) {
+  // Information end and median (TailDropCell): the composite where S falls below the
+  // threshold, then the cell inside it.
+  const auto first_below = [&](double fraction) -> std::uint32_t {
+    const double threshold = fraction * s_start;
+    if (w_all_free_ >= threshold) return static_cast<std::uint32_t>(n + 1);
     std::size_t k = list_.size();
     while (k > 0 && s_at[k - 1] < threshold) --k;
     std::size_t cell = start + 1;  // S(start) itself is below: fraction > 1
@@ -540,8 +541,10 @@ BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from,
         cell = c.first + t + 1;
       }
     }
-    out.info_end = static_cast<std::uint32_t>(std::max(cell, start + 1));
-  }
+    return static_cast<std::uint32_t>(std::max(cell, start + 1));
+  };
+  out.info_end = first_below(tail_fraction);
+  out.median = first_below(0.5);
   return out;
 }
 

@@ -357,6 +357,7 @@ BeamProfile BeamGrid::Profile(std::size_t beam, double from_m, double tail_fract
   BeamProfile out;
   out.mass_begin_m = cells.mass_begin > n ? kInf : cells.mass_begin * cell;
   out.info_end_m = cells.info_end > n ? kInf : cells.info_end * cell;
+  out.median_m = cells.median > n ? kInf : cells.median * cell;
   const std::size_t end = std::min<std::size_t>(cells.mass_begin, n);
   if (end <= start) {
     out.free_log_odds = -kInf;

@@ -13,27 +13,56 @@ constexpr int kTreeMaxVal = 32768;  // octomap tree_max_val for depth 16
 constexpr std::size_t kChunkSegments = 256;
 constexpr std::size_t kRowsPerBlock = 4;
 constexpr double kProbabilityFloor = 1e-9;
+constexpr double kPi = 3.14159265358979323846;
 
 double Logit(double p) {
   p = std::clamp(p, kProbabilityFloor, 1.0 - kProbabilityFloor);
   return std::log(p / (1.0 - p));
 }
 
+// Offset of sub-ray i of k across a beam, in beam widths (-0.5, 0.5).
+double SubOffset(int i, int k) { return (i + 0.5) / k - 0.5; }
+
+// Shift of the first-hit distribution at offset f toward the neighbour steps (`minus` at
+// f < 0, `plus` at f > 0): linear from the beam's centre to the neighbour's.
+double ShiftAt(double f, double minus, double plus) { return f >= 0.0 ? f * plus : -f * minus; }
+
 }  // namespace
 
+std::vector<BeamProfile> ProfileBeams(const BeamGrid& grid, const RenderOptions& options,
+                                      double t_start, std::size_t workers) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  std::vector<BeamProfile> profiles(grid.beam_count(),
+                                    {kInf, kInf, -kInf, std::numeric_limits<double>::quiet_NaN()});
+  const auto cols = static_cast<std::size_t>(grid.tessellation().cols());
+  ForEachRowBlock(static_cast<std::size_t>(grid.tessellation().rows()), workers,
+                  [&](std::size_t, const std::vector<std::size_t>& rows) {
+                    for (const std::size_t row : rows) {
+                      for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
+                        if (!grid.Touched(b)) continue;
+                        profiles[b] =
+                            grid.Profile(b, t_start, options.tail_mass, options.free_ratio);
+                      }
+                    }
+                  });
+  return profiles;
+}
+
 BeamTracer::BeamTracer(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-                       const RenderOptions& options)
+                       const RenderOptions& options, const std::vector<BeamProfile>& profiles)
     : grid_(grid),
       options_(options),
+      profiles_(profiles),
       R_(T_world_sensor.linear()),
       origin_(T_world_sensor.translation()),
-      t_start_(std::max(0.0, grid.spec().r_min_m)),
+      t_start_(StartOf(grid)),
       t_end_(std::min(static_cast<double>(grid.cells_per_beam()) * grid.options().cell_size_m,
                       options.max_range_m)),
       width_rad_(std::max(grid.tessellation().beam_width_h_rad(),
                           grid.tessellation().beam_width_v_rad())),
       cell_m_(grid.options().cell_size_m),
-      inv_res_(1.0 / options.resolution_m) {
+      inv_res_(1.0 / options.resolution_m),
+      continuity_(1.0 / std::tan(std::clamp(options.min_incidence_deg, 0.1, 89.0) * kPi / 180.0)) {
   boundaries_.reserve(kChunkSegments + 1);
   keys_.reserve(kChunkSegments);
 }
@@ -49,15 +78,19 @@ double BeamTracer::PriorLogOddsOfCells(long n) {
 }
 
 double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_ref,
-                         double t_first, float weight_scale, std::vector<Segment>* out,
-                         double info_end_m) {
+                         double t_first, double shift, float weight_scale,
+                         std::vector<Segment>* out, double info_end_m) {
+  // The distribution is read at u = t - shift; its blind cells (u < r_min) never are.
+  t_ref = std::max(t_ref, t_start_ + std::max(shift, 0.0));
   if (!(t_end_ > t_ref)) return t_ref;
   // Voxels beyond the cell where the remaining first-hit mass falls below tail_mass are never
   // reached: the loop below stops there. Entering no voxel past that cell saves the traversal
   // and the interval lookups of a whole chunk behind every surface; the voxel holding the cell
   // is still crossed whole.
-  if (std::isnan(info_end_m)) info_end_m = grid_.InformationEndM(beam, t_ref, options_.tail_mass);
-  const double t_last_entry = std::min(t_end_, info_end_m + cell_m_);
+  if (std::isnan(info_end_m)) {
+    info_end_m = grid_.InformationEndM(beam, t_ref - shift, options_.tail_mass);
+  }
+  const double t_last_entry = std::min(t_end_, info_end_m + shift + cell_m_);
   t_first = std::max(t_first, t_ref);
   if (t_first >= t_last_entry) return t_last_entry;
   const double res = options_.resolution_m;
@@ -89,7 +122,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
   // The mass the ray has left behind it since t_ref, as a trace from t_ref would have counted it.
   double remaining_mass = 1.0;
   if (t_in > t_ref) {
-    boundaries_.assign({t_ref, t_in});
+    boundaries_.assign({t_ref - shift, t_in - shift});
     grid_.IntervalOccupancy(beam, boundaries_, &occupancy_);
     remaining_mass = 1.0 - occupancy_[0];
     if (remaining_mass < options_.tail_mass) return t_in;
@@ -112,6 +145,9 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
       t_max[axis] += t_delta[axis];
     }
     if (keys_.empty()) break;
+    if (shift != 0.0) {
+      for (double& b : boundaries_) b -= shift;
+    }
     grid_.IntervalOccupancy(beam, boundaries_, &occupancy_);
     long c1 = std::lround(boundaries_[0] / cell_m_);
     for (std::size_t j = 0; j < keys_.size(); ++j) {
@@ -123,11 +159,11 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
       evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);
       const double length_m = boundaries_[j + 1] - boundaries_[j];
       out->push_back({keys_[j], static_cast<float>(evidence),
-                      static_cast<float>(length_m) * weight_scale, boundaries_[j + 1]});
+                      static_cast<float>(length_m) * weight_scale, boundaries_[j + 1] + shift});
       remaining_mass *= (1.0 - p);
       if (remaining_mass < options_.tail_mass) {
         done = true;
-        t_in = boundaries_[j + 1];
+        t_in = boundaries_[j + 1] + shift;
         break;
       }
     }
@@ -136,53 +172,114 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
   return t_in;
 }
 
-std::size_t BeamTracer::TraceBeam(std::size_t beam, double first_m, std::vector<Segment>* out,
-                                  double info_end_m) {
+double BeamTracer::VoxelEntry(const Eigen::Vector3d& dir, double r) const {
+  if (!(r > t_start_)) return t_start_;
+  const Eigen::Vector3d p = origin_ + dir * r;
+  double t = t_start_;
+  for (int a = 0; a < 3; ++a) {
+    if (dir[a] == 0.0) continue;
+    const double lo = std::floor(p[a] * inv_res_) * options_.resolution_m;
+    const double face = dir[a] > 0.0 ? lo : lo + options_.resolution_m;
+    t = std::max(t, r + (face - p[a]) / dir[a]);
+  }
+  return std::min(t, r);
+}
+
+double BeamTracer::SurfaceStep(std::size_t beam, long neighbour, double spacing_rad) const {
+  const double m = profiles_[beam].median_m;
+  const double n = profiles_[static_cast<std::size_t>(neighbour)].median_m;
+  if (!std::isfinite(m) || !std::isfinite(n)) return 0.0;
+  // On one surface seen at incidence alpha, neighbouring beams' ranges differ by about
+  // r * spacing / tan(alpha); more than the shallowest incidence allows is a depth edge.
+  if (std::abs(n - m) > continuity_ * spacing_rad * std::min(m, n)) return 0.0;
+  return n - m;
+}
+
+BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only,
+                                std::vector<Segment>* out) {
   const BeamTessellation& tess = grid_.tessellation();
+  const BeamProfile& profile = profiles_[beam];
+  const double mass_begin = profile.mass_begin_m;
+  const auto first = [&](double t_from, double shift) {
+    return first_mass_only ? std::max(t_from, mass_begin + shift) : t_from;
+  };
+  BeamTrace trace;
   const Eigen::Vector3d dir_sensor = tess.Direction(beam);
   const Eigen::Vector3d dir = R_ * dir_sensor;
   const std::size_t kept_from = out->size();
-  const double t_stop = Trace(beam, dir, t_start_, first_m, 1.0f, out, info_end_m);
-  const int k = std::clamp(static_cast<int>(std::ceil(width_rad_ * t_stop / options_.resolution_m)),
-                           1, std::max(1, options_.max_subrays_per_axis));
-  if (k == 1) return 1;
-  // The beam's footprint outgrows a voxel at r_split = resolution / width: keep the centre ray
-  // up to the voxel boundary before r_split and spread k x k sub-rays uniformly over its
-  // azimuth x elevation sector beyond, each with weight 1 / k^2.
-  const double r_split = options_.resolution_m / width_rad_;
-  double t_sub = t_start_;
-  if (r_split > t_start_) {
-    // Where the centre ray enters the voxel holding r_split.
-    const Eigen::Vector3d p = origin_ + dir * r_split;
-    for (int a = 0; a < 3; ++a) {
-      if (dir[a] == 0.0) continue;
-      const double lo = std::floor(p[a] * inv_res_) * options_.resolution_m;
-      const double face = dir[a] > 0.0 ? lo : lo + options_.resolution_m;
-      t_sub = std::max(t_sub, r_split + (face - p[a]) / dir[a]);
-    }
-    t_sub = std::min(t_sub, r_split);
+  const double t_stop =
+      Trace(beam, dir, t_start_, first(t_start_, 0.0), 0.0, 1.0f, out, profile.info_end_m);
+  trace.rays = 1;
+  trace.mass_begin_m = mass_begin;
+  // Sub-rays: k_width a side where the sector outgrows a voxel, k_surface where the surface
+  // runs on into a neighbour (enough that neighbouring sub-rays' surfaces lie within a voxel).
+  const int k_width =
+      std::clamp(static_cast<int>(std::ceil(width_rad_ * t_stop / options_.resolution_m)), 1,
+                 std::max(1, options_.max_subrays_per_axis));
+  double left = 0.0, right = 0.0, up = 0.0, down = 0.0;
+  // Only the max rule: the mean and the pool weigh every segment of every sub-ray, and the
+  // surface's sub-rays would dilute them.
+  if (options_.follow_surfaces && options_.combine == VoxelCombine::kMaxLogOdds &&
+      std::isfinite(profile.median_m)) {
+    const auto cols = static_cast<long>(tess.cols());
+    const auto rows = static_cast<long>(tess.rows());
+    const long b = static_cast<long>(beam);
+    const long col = b % cols, row = b / cols;
+    if (col > 0) left = SurfaceStep(beam, b - 1, tess.beam_width_h_rad());
+    if (col + 1 < cols) right = SurfaceStep(beam, b + 1, tess.beam_width_h_rad());
+    if (row > 0) up = SurfaceStep(beam, b - cols, tess.beam_width_v_rad());  // elevation +
+    if (row + 1 < rows) down = SurfaceStep(beam, b + cols, tess.beam_width_v_rad());
   }
+  const int k_max = std::max(1, options_.max_surface_subrays_per_axis);
+  const auto k_surface = [&](double minus, double plus) {
+    const double span = 0.5 * (std::abs(minus) + std::abs(plus));
+    return std::clamp(static_cast<int>(std::ceil(span / options_.resolution_m)), 1, k_max);
+  };
+  const int k_u = std::max(k_width, k_surface(left, right));
+  const int k_v = std::max(k_width, k_surface(down, up));
+  if (k_u == 1 && k_v == 1) return trace;
+  // The nearest shift of any sub-ray: where the sub-rays' mass can start.
+  double min_shift = 0.0;
+  {
+    double su = 0.0, sv = 0.0;
+    for (int i = 0; i < k_u; ++i) su = std::min(su, ShiftAt(SubOffset(i, k_u), left, right));
+    for (int j = 0; j < k_v; ++j) sv = std::min(sv, ShiftAt(SubOffset(j, k_v), down, up));
+    min_shift = su + sv;
+  }
+  // The centre ray is kept up to the voxel boundary before the sub-rays start: r_split where the
+  // sector outgrows a voxel, and before the nearest shifted mass where the surface is followed.
+  double r_sub = std::numeric_limits<double>::infinity();
+  if (k_width > 1) r_sub = options_.resolution_m / width_rad_;
+  if (k_u > k_width || k_v > k_width) {
+    r_sub = std::min(r_sub, mass_begin + min_shift - options_.resolution_m);
+  }
+  const double t_sub = VoxelEntry(dir, r_sub);
   std::size_t keep = kept_from;
   while (keep < out->size() && (*out)[keep].t_out_m <= t_sub) ++keep;
   out->resize(keep);
-  // Every sub-ray starts at t_sub: their information end is shared.
-  const double sub_info_end_m =
-      t_sub == t_start_ && !std::isnan(info_end_m)
-          ? info_end_m
-          : grid_.InformationEndM(beam, t_sub, options_.tail_mass);
   const double az = std::atan2(dir_sensor.x(), dir_sensor.z());
   const double el = std::atan2(-dir_sensor.y(), std::hypot(dir_sensor.x(), dir_sensor.z()));
-  const float weight = 1.0f / static_cast<float>(k * k);
-  for (int i = 0; i < k; ++i) {
-    const double sub_az = az + ((i + 0.5) / k - 0.5) * tess.beam_width_h_rad();
-    for (int j = 0; j < k; ++j) {
-      const double sub_el = el + ((j + 0.5) / k - 0.5) * tess.beam_width_v_rad();
+  const float weight = 1.0f / static_cast<float>(k_u * k_v);
+  // Unshifted sub-rays from t_sub share their information end.
+  const double unshifted_info_end = t_sub == t_start_ && !std::isnan(profile.info_end_m)
+                                        ? profile.info_end_m
+                                        : grid_.InformationEndM(beam, t_sub, options_.tail_mass);
+  for (int i = 0; i < k_u; ++i) {
+    const double fu = SubOffset(i, k_u);
+    const double sub_az = az + fu * tess.beam_width_h_rad();
+    for (int j = 0; j < k_v; ++j) {
+      const double fv = SubOffset(j, k_v);
+      const double sub_el = el + fv * tess.beam_width_v_rad();
+      const double shift = ShiftAt(fu, left, right) + ShiftAt(fv, down, up);
       const Eigen::Vector3d d(std::cos(sub_el) * std::sin(sub_az), -std::sin(sub_el),
                               std::cos(sub_el) * std::cos(sub_az));
-      Trace(beam, R_ * d, t_sub, first_m, weight, out, sub_info_end_m);
+      Trace(beam, R_ * d, t_sub, first(t_sub, shift), shift, weight, out,
+            shift == 0.0 ? unshifted_info_end : std::numeric_limits<double>::quiet_NaN());
+      ++trace.rays;
     }
   }
-  return 1 + static_cast<std::size_t>(k * k);
+  trace.mass_begin_m = mass_begin + min_shift;
+  return trace;
 }
 
 std::size_t RowWorkers(std::size_t rows, unsigned threads) {

@@ -1,8 +1,14 @@
-// Internal to core: tracing a beam's centre ray (and, where the beam is wider than a voxel, its
-// sub-rays) through the voxels of a world-frame grid, with each crossing's evidence from the
-// beam's interval occupancy. Shared by the ray-traced render (every beam from r_min on) and the
-// projective render (only through each beam's first-hit mass), so that both give a crossed voxel
-// exactly the same segments.
+// Internal to core: tracing a beam's rays through the voxels of a world-frame grid, with each
+// crossing's evidence from the beam's interval occupancy. Shared by the ray-traced render (every
+// beam from r_min on) and the projective render (only through each beam's first-hit mass), so
+// that both give a crossed voxel exactly the same segments.
+//
+// A beam is traced along its centre line, and with k_u x k_v sub-rays spread over its spherical
+// sector where one line does not cover it: where the sector outgrows a voxel (beyond
+// r_split = resolution / beam width), and where the surface it sees runs on into a neighbouring
+// beam's (RenderOptions::follow_surfaces): a sub-ray then carries the beam's first-hit
+// distribution shifted to the range interpolated between the two beams' surfaces, so a floor
+// seen at a shallow angle is continuous between the rows of beams instead of striped.
 #pragma once
 
 #include <octomap/OcTree.h>
@@ -26,35 +32,57 @@ struct Segment {
   double t_out_m;  // range where the ray leaves the voxel
 };
 
+// What tracing a beam did.
+struct BeamTrace {
+  std::size_t rays = 0;
+  // The nearest a ray of the beam placed the start of its first-hit mass (the beam's
+  // mass_begin_m moved by the sub-ray's shift); +infinity if no ray carried mass.
+  double mass_begin_m = std::numeric_limits<double>::infinity();
+};
+
+// Every touched beam's profile from `t_start` (BeamGrid::Profile), untouched ones with
+// mass_begin_m = +infinity and median_m = NaN; computed on `workers` threads.
+[[nodiscard]] std::vector<BeamProfile> ProfileBeams(const BeamGrid& grid,
+                                                    const RenderOptions& options, double t_start,
+                                                    std::size_t workers);
+
 // Traces the beams of one grid seen from one pose. Not thread-safe: one per thread.
 class BeamTracer {
  public:
+  // profiles: ProfileBeams(grid, options, t_start(), ...), shared by every tracer of a render.
   BeamTracer(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-             const RenderOptions& options);
+             const RenderOptions& options, const std::vector<BeamProfile>& profiles);
 
   // Start of every ray (r_min, at least 0) and the end of the render (beam length, max range).
   [[nodiscard]] double t_start() const { return t_start_; }
   [[nodiscard]] double t_end() const { return t_end_; }
 
-  // Appends the segments of beam b (touched) to *out: its centre ray from t_start(), and beyond
-  // r_split = resolution / beam width its k x k sub-rays where the beam's footprint outgrows a
-  // voxel (docs/mapping.md, "Beam width"). Only voxels a ray leaves after first_m are traced:
-  // the voxel holding first_m is crossed whole (from where the ray enters it, or t_start()),
-  // and the evidence of every crossing, and where each ray stops, are what a trace from
-  // t_start() gives. first_m = t_start() traces the whole beam. info_end_m, if not NaN, is
-  // BeamGrid::InformationEndM(beam, t_start(), tail_mass) known already. Returns the rays traced.
-  std::size_t TraceBeam(std::size_t beam, double first_m, std::vector<Segment>* out,
-                        double info_end_m = std::numeric_limits<double>::quiet_NaN());
+  // Appends the segments of beam b (touched) to *out. With first_mass_only, a ray enters no
+  // voxel it leaves before the start of its first-hit mass: the voxel holding that start is
+  // crossed whole (from where the ray enters it, or t_start()), and the evidence of every
+  // crossing, and where each ray stops, are what the whole trace gives.
+  BeamTrace TraceBeam(std::size_t beam, bool first_mass_only, std::vector<Segment>* out);
+
+  [[nodiscard]] static double StartOf(const BeamGrid& grid) {
+    return std::max(0.0, grid.spec().r_min_m);
+  }
 
  private:
   // One ray from t_ref (the start its information is measured from) to t_end, entering no
-  // voxel that it leaves before t_first; returns where it stopped.
+  // voxel that it leaves before t_first; `shift` moves the beam's first-hit distribution along
+  // the ray (range t reads the distribution at t - shift). Returns where it stopped.
   double Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_ref, double t_first,
-               float weight_scale, std::vector<Segment>* out, double info_end_m);
+               double shift, float weight_scale, std::vector<Segment>* out, double info_end_m);
+  // Where the centre ray enters the voxel that holds range r (not before t_start()).
+  double VoxelEntry(const Eigen::Vector3d& dir, double r) const;
+  // Range change from beam b's surface to the neighbour's, 0 if the neighbour sees another
+  // surface (a depth edge) or none.
+  double SurfaceStep(std::size_t beam, long neighbour, double spacing_rad) const;
   double PriorLogOddsOfCells(long n);
 
   const BeamGrid& grid_;
   const RenderOptions& options_;
+  const std::vector<BeamProfile>& profiles_;
   Eigen::Matrix3d R_;
   Eigen::Vector3d origin_;
   double t_start_;
@@ -62,6 +90,7 @@ class BeamTracer {
   double width_rad_;
   double cell_m_;
   double inv_res_;
+  double continuity_;  // tan of the shallowest incidence still followed across beams, inverted
   std::vector<double> prior_cache_;
   std::vector<double> boundaries_;
   std::vector<octomap::OcTreeKey> keys_;

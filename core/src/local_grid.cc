@@ -194,9 +194,11 @@ LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_
   const std::size_t workers = detail::RowWorkers(rows, options.threads);
   std::vector<LocalGrid> parts(workers, LocalGrid(options.resolution_m, options.combine));
   std::vector<RenderStats> part_stats(workers);
+  const std::vector<BeamProfile> profiles =
+      detail::ProfileBeams(grid, options, detail::BeamTracer::StartOf(grid), workers);
   detail::ForEachRowBlock(
       rows, workers, [&](std::size_t t, const std::vector<std::size_t>& my_rows) {
-        detail::BeamTracer tracer(grid, T_world_sensor, options);
+        detail::BeamTracer tracer(grid, T_world_sensor, options, profiles);
         std::vector<detail::Segment> segments;
         segments.reserve(512);
         RenderStats& s = part_stats[t];
@@ -208,7 +210,7 @@ LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_
             }
             ++s.beams_rendered;
             segments.clear();
-            s.rays_traced += tracer.TraceBeam(b, tracer.t_start(), &segments);
+            s.rays_traced += tracer.TraceBeam(b, /*first_mass_only=*/false, &segments).rays;
             s.segments += segments.size();
             for (const auto& seg : segments) parts[t].AddEvidence(seg.key, seg.evidence, seg.weight);
           }

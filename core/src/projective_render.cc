@@ -326,12 +326,13 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
   std::vector<LocalGrid> parts(workers, LocalGrid(options.resolution_m, options.combine));
   std::vector<RenderStats> part_stats(workers);
   std::vector<Aggregate> beams(grid.beam_count());
-  double t_start = 0.0;
+  const double t_start = detail::BeamTracer::StartOf(grid);
   const float clamp = static_cast<float>(options.max_abs_log_odds);
-  // Each beam's free zone and mass, its rays traced through the mass.
+  // Each beam's free zone and mass (first, for every beam: a beam's rays follow its
+  // neighbours' surfaces), then its rays traced through the mass.
+  const std::vector<BeamProfile> profiles = detail::ProfileBeams(grid, options, t_start, workers);
   detail::ForEachRowBlock(rows, workers, [&](std::size_t t, const std::vector<std::size_t>& mine) {
-    detail::BeamTracer tracer(grid, T_world_sensor, options);
-    if (t == 0) t_start = tracer.t_start();
+    detail::BeamTracer tracer(grid, T_world_sensor, options, profiles);
     std::vector<detail::Segment> segments;
     RenderStats& s = part_stats[t];
     parts[t].Reserve(mine.size() * cols);
@@ -344,14 +345,15 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
           continue;
         }
         ++s.beams_rendered;
-        const BeamProfile p =
-            grid.Profile(b, tracer.t_start(), options.tail_mass, options.free_ratio);
-        const double free_end = std::min(p.mass_begin_m, tracer.t_end());
-        double far = free_end;
+        const BeamProfile& p = profiles[b];
+        double free_end = std::min(p.mass_begin_m, tracer.t_end());
         segments.clear();
         if (free_end < tracer.t_end()) {
-          s.rays_traced += tracer.TraceBeam(b, free_end, &segments, p.info_end_m);
+          const detail::BeamTrace trace = tracer.TraceBeam(b, /*first_mass_only=*/true, &segments);
+          s.rays_traced += trace.rays;
+          free_end = std::max(tracer.t_start(), std::min(free_end, trace.mass_begin_m));
         }
+        double far = free_end;
         for (const auto& seg : segments) {
           far = std::max(far, seg.t_out_m);
           parts[t].AddEvidence(seg.key, seg.evidence, seg.weight);
@@ -390,7 +392,9 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
 
 RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                     const RenderOptions& options, RenderStats* stats) {
-  if (options.method == RenderMethod::kRayTraced) {
+  // The mean and the pool of a voxel's segments need every crossing of every ray, free ones
+  // included: only the max rule lets the free zones be decided block by block.
+  if (options.method == RenderMethod::kRayTraced || options.combine != VoxelCombine::kMaxLogOdds) {
     return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
   }
   return RenderProjective(grid, T_world_sensor, options, stats);

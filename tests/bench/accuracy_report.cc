@@ -24,8 +24,9 @@ using Clock = std::chrono::steady_clock;
 
 void PrintRow(const std::string& scenario, const std::string& method, const AccuracyReport& r,
               double seconds) {
-  std::printf("| %s | %s | %.3f | %.3f | %.3f | %.4f | %.1f | %.3f | %.2f |\n", scenario.c_str(),
-              method.c_str(), r.precision, r.recall, r.free_accuracy, r.brier,
+  std::printf("| %s | %s | %.3f | %.3f | %.3f | %.3f | %.4f | %.1f | %.3f | %.2f |\n",
+              scenario.c_str(), method.c_str(), r.precision, r.surface_precision, r.recall,
+              r.free_accuracy, r.brier,
               1000.0 * r.mean_surface_error_m, r.unknown_fraction, seconds);
 }
 
@@ -57,9 +58,8 @@ int main(int argc, char** argv) {
       "surface (occupied); p = 0.5 where a map has no node\n\n",
       resolution_m);
   std::printf(
-      "| scenario | method | precision | recall | free acc. | Brier | surface "
-      "err. [mm] | "
-      "unknown | time [s] |\n|---|---|---|---|---|---|---|---|---|\n");
+      "| scenario | method | precision | precision (surface) | recall | free acc. | Brier | "
+      "surface err. [mm] | unknown | time [s] |\n|---|---|---|---|---|---|---|---|---|---|\n");
   for (const Scenario& sc : scenarios) {
     std::vector<fusion::sim::SensorRun> runs;
     std::vector<std::vector<fusion::sim::OrganizedCloud>> frames;

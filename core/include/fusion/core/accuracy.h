@@ -42,6 +42,11 @@ struct AccuracyReport {
   std::size_t predicted_occupied = 0;  // map voxels with p > threshold (labelled or not)
   std::size_t true_positives = 0;      // predicted occupied and labelled occupied
   double precision = 0.0;              // true_positives / predicted_occupied
+  // Predicted-occupied voxels a true surface passes through, labelled or not (the labels only
+  // know the voxels some noise-free centre ray entered; a floor voxel between two rows of
+  // beams holds the floor all the same).
+  std::size_t predicted_holding_surface = 0;
+  double surface_precision = 0.0;  // predicted_holding_surface / predicted_occupied
   double recall = 0.0;                 // true_positives / labelled_occupied
   double free_accuracy = 0.0;          // labelled free voxels with p < threshold / labelled free
   double brier = 0.0;             // mean (p - label)^2 over labelled voxels, p = 0.5 if unknown

@@ -33,12 +33,14 @@ inline constexpr double kNoInformationTail = 1e-100;
 //   info_end:   the smallest cell c in (from, N] with S(c) < tail_fraction * S(from)
 //               (TailDropCell), N + 1 if none;
 //   free_hazard: -log(S(end) / S(from)) over the free zone [from, end), end = min(mass_begin,
-//               N): the zone's cumulative hazard, to compare with the prior's (0 if empty).
+//               N): the zone's cumulative hazard, to compare with the prior's (0 if empty);
+//   median:     TailDropCell(from, 0.5): where the first hit is as likely before as after.
 // A cell without information (S <= kNoInformationTail * total) ends the free zone.
 struct BeamProfileCells {
   std::uint32_t mass_begin = 0;
   std::uint32_t info_end = 0;
   double free_hazard = 0.0;
+  std::uint32_t median = 0;
 };
 
 // Eq. 7: p(B) (N + 1 values) from p(m) (N values).

@@ -111,6 +111,9 @@ struct BeamProfile {
   // prior's over the same length, as log-odds (about the evidence a voxel-long segment of the
   // zone carries, logit(p) - logit(prior)); -infinity if the zone is empty.
   double free_log_odds = 0.0;
+  // InformationEndM(beam, from_m, 0.5): the first hit is as likely before as after it (where
+  // the beam's surface is); +infinity if the beam more likely sees through.
+  double median_m = 0.0;
 };
 
 // One reading along a beam.

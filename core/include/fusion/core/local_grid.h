@@ -69,6 +69,15 @@ struct RenderOptions {
   int max_subrays_per_axis = kDefaultMaxSubraysPerAxis;
   // Rays are traced no further than this (metres from the sensor origin).
   double max_range_m = 1e9;
+  // A beam whose surface runs on into a neighbouring beam's (their first-hit medians differ by
+  // less than the incidence min_incidence_deg allows) is traced with sub-rays across its sector,
+  // each carrying the beam's first-hit distribution moved to the range interpolated between the
+  // two surfaces: a floor seen at a shallow angle is then continuous between the rows of beams
+  // (docs/mapping.md, "Surfaces between beams"). At most max_surface_subrays_per_axis a side.
+  // With the max voxel rule only.
+  bool follow_surfaces = true;
+  double min_incidence_deg = 3.0;
+  int max_surface_subrays_per_axis = 8;
   // Each segment's evidence is clamped to +-this (natural log-odds).
   double max_abs_log_odds = kDefaultMaxAbsLogOdds;
   // Threads that trace beams (each into its own grid, merged at the end; the result is the

@@ -22,7 +22,9 @@ namespace fusion {
                                             const RenderOptions& options,
                                             RenderStats* stats = nullptr);
 
-// options.method's render: RenderProjective, or RenderBeamGrid as a RenderedGrid of voxels.
+// options.method's render: RenderProjective, or RenderBeamGrid as a RenderedGrid of voxels. The
+// voxel rules other than the max (the mean and the pool of a voxel's segments) need every
+// crossing of every ray, free ones included, and are always rendered ray by ray.
 [[nodiscard]] RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                                   const RenderOptions& options, RenderStats* stats = nullptr);
 
