@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <vector>
 
@@ -61,6 +62,9 @@ class BeamPyramid {
     }
   }
 
+  [[nodiscard]] const Aggregate& Beam(int col, int row) const {
+    return levels_[0].cells[static_cast<std::size_t>(row) * levels_[0].cols + col];
+  }
   // Beams of columns [c0, c1] and rows [r0, r1] (a superset, for large rectangles).
   [[nodiscard]] Aggregate Query(int c0, int c1, int r0, int r1) const {
     Aggregate out;
@@ -101,20 +105,31 @@ class Descent {
         options_(options),
         pyramid_(pyramid),
         traced_(traced),
+        R_(T_world_sensor.linear()),
         Rt_(T_world_sensor.linear().transpose()),
         origin_(T_world_sensor.translation()),
         t_start_(t_start),
         global_far_(global_far),
         out_(out),
         stats_(stats) {
-    // Known space ends at the centre lines of the outermost beams, as the rays of the
-    // ray-traced render do.
-    const double half_w = 0.5 * tess_.beam_width_h_rad();
-    const double half_h = 0.5 * tess_.beam_width_v_rad();
-    az_min_ = std::tan(std::atan(tess_.TanAzimuthMin()) + half_w);
-    az_max_ = std::tan(std::atan(tess_.TanAzimuthMax()) - half_w);
-    el_min_ = std::tan(std::atan(tess_.TanElevationMin()) + half_h);
-    el_max_ = std::tan(std::atan(tess_.TanElevationMax()) - half_h);
+    // Known space ends where the outermost rays of the ray-traced render run: the centre lines of
+    // the edge beams, and beyond r_split (where beams outgrow a voxel) their outermost sub-rays,
+    // 1 / (2 k) of a beam from the edge of the field of view.
+    fov_ = Bounds(0.0);
+    const double width = std::max(tess_.beam_width_h_rad(), tess_.beam_width_v_rad());
+    r_split2_ = Square(options.resolution_m / width);
+    const int k_far = std::clamp(
+        static_cast<int>(std::ceil(width * grid.cells_per_beam() * grid.options().cell_size_m /
+                                   options.resolution_m)),
+        1, std::max(1, options.max_subrays_per_axis));
+    known_near_ = Bounds(0.5);
+    known_far_ = Bounds(0.5 / k_far);
+    for (int c = 0; c < tess_.cols(); ++c) {
+      col_centres_.push_back(std::tan(-0.5 * grid.spec().fov_h_rad + (c + 0.5) * tess_.beam_width_h_rad()));
+    }
+    for (int r = 0; r < tess_.rows(); ++r) {
+      row_centres_.push_back(std::tan(0.5 * grid.spec().fov_v_rad - (r + 0.5) * tess_.beam_width_v_rad()));
+    }
     // Every direction of the field of view has z >= cone_ * |p| (its corners lean the most).
     const double ta = std::max(std::abs(tess_.TanAzimuthMin()), std::abs(tess_.TanAzimuthMax()));
     const double te = std::max(std::abs(tess_.TanElevationMin()), std::abs(tess_.TanElevationMax()));
@@ -180,6 +195,7 @@ class Descent {
       const int cx = child & 1, cy = (child >> 1) & 1, cz = (child >> 2) & 1;
       Box box;
       box.size = child_size;
+      box.lo = lo + Eigen::Vector3d(cx, cy, cz) * child_size;
       box.r_lo2 = near2[0][cx] + near2[1][cy] + near2[2][cz];
       box.r_hi2 = far2[0][cx] + far2[1][cy] + far2[2][cz];
       if (box.r_hi2 <= t_start2_ || box.r_lo2 >= global_far2_) continue;
@@ -218,12 +234,37 @@ class Descent {
   enum class Kind { kUnknown, kFree, kMixed };
   struct Box {
     double size = 0.0;
+    Eigen::Vector3d lo = Eigen::Vector3d::Zero();  // world frame, the corner nearest -infinity
     double r_lo2 = 0.0;  // squared distance of the nearest point to the sensor
     double r_hi2 = 0.0;  // squared distance of the farthest corner
     bool ahead = false;  // every corner in front of the sensor
     double z_max = 0.0;  // along the optical axis
     double az_lo = 0.0, az_hi = 0.0, el_lo = 0.0, el_hi = 0.0;  // tangents over the corners
   };
+  // Tangent bounds of the field of view, each side moved in by `inset` beam widths.
+  struct TanBounds {
+    double az_min, az_max, el_min, el_max;
+    [[nodiscard]] bool Overlaps(const Box& b) const {
+      return b.az_hi >= az_min && b.az_lo <= az_max && b.el_hi >= el_min && b.el_lo <= el_max;
+    }
+    [[nodiscard]] bool Holds(const Box& b) const {
+      return b.az_lo >= az_min && b.az_hi <= az_max && b.el_lo >= el_min && b.el_hi <= el_max;
+    }
+    [[nodiscard]] bool Holds(double az, double el) const {
+      return az >= az_min && az <= az_max && el >= el_min && el <= el_max;
+    }
+  };
+  TanBounds Bounds(double inset) const {
+    const double w = inset * tess_.beam_width_h_rad();
+    const double h = inset * tess_.beam_width_v_rad();
+    return {std::tan(std::atan(tess_.TanAzimuthMin()) + w),
+            std::tan(std::atan(tess_.TanAzimuthMax()) - w),
+            std::tan(std::atan(tess_.TanElevationMin()) + h),
+            std::tan(std::atan(tess_.TanElevationMax()) - h)};
+  }
+  // The known region that applies at the near / far end of a box.
+  const TanBounds& KnownAt(double r2) const { return r2 > r_split2_ ? known_far_ : known_near_; }
+
   struct Verdict {
     Kind kind = Kind::kUnknown;
     float free_value = 0.0f;
@@ -246,12 +287,8 @@ class Descent {
     const double margin = box.size * box.size / (2.0 * box.r_lo2);
     box.el_lo -= margin * (1.0 + box.el_lo * box.el_lo);
     box.el_hi += margin * (1.0 + box.el_hi * box.el_hi);
-    if (box.az_hi < az_min_ || box.az_lo > az_max_ || box.el_hi < el_min_ ||
-        box.el_lo > el_max_) {
-      return v;
-    }
-    const bool in_fov = box.az_lo >= az_min_ && box.az_hi <= az_max_ && box.el_lo >= el_min_ &&
-                        box.el_hi <= el_max_;
+    if (!fov_.Overlaps(box)) return v;
+    const bool in_known = KnownAt(box.r_lo2).Holds(box) && KnownAt(box.r_hi2).Holds(box);
     if (free_through != nullptr) {
       v.beams = *free_through;
     } else {
@@ -261,7 +298,7 @@ class Descent {
     }
     const bool all_free =
         v.beams.touched == v.beams.beams && box.r_hi2 <= Square(v.beams.min_free_end);
-    if (all_free && ((in_fov && box.r_lo2 >= t_start2_) || voxel)) {
+    if (all_free && in_known && box.r_lo2 >= t_start2_) {
       v.kind = Kind::kFree;
       v.free_value = v.beams.max_free_value;
       return v;
@@ -272,16 +309,80 @@ class Descent {
   }
 
   // A voxel the pyramid could not decide: its traced value if a ray crossed it in a beam's
-  // mass, else free if some beam's free zone reaches into it, else unknown.
+  // mass, else free if a beam whose rays reach it is free into it, else unknown. A beam's rays
+  // reach the voxel if its centre line does (its direction lies in the voxel's angular box);
+  // beyond r_split, where beams are wider than voxels and traced with sub-rays, if the voxel
+  // overlaps its sector.
   void VisitVoxel(const std::array<int, 3>& key_min, const Box& box, const Verdict& v) {
     const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
                                  static_cast<octomap::key_type>(key_min[1]),
                                  static_cast<octomap::key_type>(key_min[2]));
-    if (const auto traced = traced_.LogOddsOf(key)) {
+    // A voxel free in every beam it overlaps holds no traced segment.
+    if (const auto traced = v.free_through ? std::nullopt : traced_.LogOddsOf(key)) {
       Emit(kTreeDepth, key_min, static_cast<float>(*traced));
-    } else if (box.r_lo2 < Square(v.beams.max_free_end)) {
-      Emit(kTreeDepth, key_min, v.beams.max_free_value);
+      return;
     }
+    if (!KnownAt(box.r_hi2).Overlaps(box) || box.r_hi2 <= t_start2_) return;
+    Aggregate reach = v.beams;
+    if (box.r_hi2 <= r_split2_) {
+      const auto c0 = std::lower_bound(col_centres_.begin(), col_centres_.end(), box.az_lo);
+      const auto c1 = std::upper_bound(c0, col_centres_.end(), box.az_hi);
+      // Row centres fall with the row index.
+      const auto r0 = std::lower_bound(row_centres_.begin(), row_centres_.end(), box.el_hi,
+                                       std::greater<double>());
+      const auto r1 = std::upper_bound(r0, row_centres_.end(), box.el_lo, std::greater<double>());
+      reach = CentreLinesThrough(box, static_cast<int>(c0 - col_centres_.begin()),
+                                 static_cast<int>(c1 - col_centres_.begin()),
+                                 static_cast<int>(r0 - row_centres_.begin()),
+                                 static_cast<int>(r1 - row_centres_.begin()));
+    }
+    if (reach.touched != 0 && box.r_lo2 < Square(reach.max_free_end)) {
+      Emit(kTreeDepth, key_min, reach.max_free_value);
+    }
+  }
+
+  // The touched beams among columns [c0, c1) and rows [r0, r1) if the centre line of one of
+  // them that is free into the box crosses it (a slab test: the angular box also holds
+  // directions that miss a cube at its corners); else nothing.
+  Aggregate CentreLinesThrough(const Box& box, int c0, int c1, int r0, int r1) {
+    Aggregate out;
+    if (c1 <= c0 || r1 <= r0) return out;
+    const Aggregate all = pyramid_.Query(c0, c1 - 1, r0, r1 - 1);
+    if (all.touched == 0 || box.r_lo2 >= Square(all.max_free_end)) return out;
+    const Eigen::Vector3d lo = box.lo - origin_;
+    const Eigen::Vector3d hi = lo + Eigen::Vector3d::Constant(box.size);
+    for (int r = r0; r < r1; ++r) {
+      for (int c = c0; c < c1; ++c) {
+        const Aggregate& beam = pyramid_.Beam(c, r);
+        if (beam.touched == 0 || box.r_lo2 >= Square(beam.max_free_end)) continue;
+        const Eigen::Vector3f& d = WorldDirection(static_cast<std::size_t>(r) * tess_.cols() + c);
+        double t_in = 0.0, t_out = std::numeric_limits<double>::infinity();
+        for (int a = 0; a < 3 && t_in <= t_out; ++a) {
+          if (d[a] == 0.0f) {
+            if (lo[a] > 0.0 || hi[a] < 0.0) t_in = t_out + 1.0;
+            continue;
+          }
+          const double ta = lo[a] / d[a], tb = hi[a] / d[a];
+          t_in = std::max(t_in, std::min(ta, tb));
+          t_out = std::min(t_out, std::max(ta, tb));
+        }
+        if (t_in <= t_out) return all;
+      }
+    }
+    return out;
+  }
+
+  // A beam's centre line in the world frame, computed once per render when first needed.
+  const Eigen::Vector3f& WorldDirection(std::size_t beam) {
+    if (directions_.empty()) {
+      directions_.resize(tess_.beam_count());
+      have_direction_.assign(tess_.beam_count(), 0);
+    }
+    if (have_direction_[beam] == 0) {
+      directions_[beam] = (R_ * tess_.Direction(beam)).cast<float>();
+      have_direction_[beam] = 1;
+    }
+    return directions_[beam];
   }
 
   void Emit(unsigned depth, const std::array<int, 3>& key_min, float value) {
@@ -300,14 +401,20 @@ class Descent {
   const RenderOptions& options_;
   const BeamPyramid& pyramid_;
   const LocalGrid& traced_;
+  Eigen::Matrix3d R_;
   Eigen::Matrix3d Rt_;
   Eigen::Vector3d origin_;
   double t_start_;
   double global_far_;
   RenderedGrid* out_;
   RenderStats* stats_;
-  double az_min_ = 0.0, az_max_ = 0.0, el_min_ = 0.0, el_max_ = 0.0;
   double cone2_ = 0.0;  // squared
+  TanBounds fov_{}, known_near_{}, known_far_{};
+  std::vector<double> col_centres_;  // tangent of each column's centre azimuth, ascending
+  std::vector<double> row_centres_;  // tangent of each row's centre elevation, descending
+  std::vector<Eigen::Vector3f> directions_;
+  std::vector<std::uint8_t> have_direction_;
+  double r_split2_ = 0.0;
   double t_start2_ = 0.0;
   double global_far2_ = 0.0;
 };
