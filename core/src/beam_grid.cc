@@ -148,10 +148,12 @@ Eigen::Vector3d BeamTessellation::Direction(std::size_t beam) const {
 
 struct BeamGrid::Impl {
   Impl(const SensorSpec& s, const BeamGridOptions& o)
+      : Impl(s, o, std::make_shared<const BeamContext>(s, o)) {}
+  Impl(const SensorSpec& s, const BeamGridOptions& o, std::shared_ptr<const BeamContext> c)
       : spec(s),
         options(o),
         tessellation(s),
-        context(std::make_shared<const BeamContext>(s, o)),
+        context(std::move(c)),
         store(MakeBeamStore(o.representation, context, tessellation.beam_count())) {}
 
   SensorSpec spec;
@@ -168,6 +170,13 @@ struct BeamGrid::Impl {
 
 BeamGrid::BeamGrid(const SensorSpec& spec, const BeamGridOptions& options)
     : impl_(std::make_unique<Impl>(spec, options)) {}
+BeamGrid::BeamGrid(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+std::unique_ptr<BeamGrid> BeamGrid::EmptyCopy() const {
+  return std::unique_ptr<BeamGrid>(
+      new BeamGrid(std::make_unique<Impl>(impl_->spec, impl_->options, impl_->context)));
+}
+
 BeamGrid::~BeamGrid() = default;
 BeamGrid::BeamGrid(BeamGrid&&) noexcept = default;
 BeamGrid& BeamGrid::operator=(BeamGrid&&) noexcept = default;
@@ -299,8 +308,6 @@ void BeamGrid::IntervalOccupancy(std::size_t beam, const std::vector<double>& bo
   impl_->CheckBeam(beam);
   out->clear();
   if (boundaries_m.size() < 2) return;
-  const std::size_t n = cells_per_beam();
-  const double cell = impl_->options.cell_size_m;
   // cells[0] = 0 (the whole beam's mass), then one cell per boundary; one TailMasses walk
   // answers both. Scratch per thread: renders call this from several threads.
   thread_local std::vector<std::uint32_t> cells;
@@ -309,25 +316,46 @@ void BeamGrid::IntervalOccupancy(std::size_t beam, const std::vector<double>& bo
   cells[0] = 0;
   std::uint32_t previous = 0;
   for (std::size_t j = 0; j < boundaries_m.size(); ++j) {
-    double c = std::round(boundaries_m[j] / cell);
-    if (!(c >= 0.0)) c = 0.0;  // NaN and negatives
-    c = std::min(c, static_cast<double>(n));
-    const std::uint32_t ci = std::max(previous, static_cast<std::uint32_t>(c));  // ascending
+    const std::uint32_t ci = std::max(previous, CellOf(boundaries_m[j]));  // ascending
     cells[j + 1] = ci;
     previous = ci;
   }
   impl_->store->TailMasses(beam, cells, &tails);
-  const double threshold = kNoInformationTail * tails[0];
   const double* tail = tails.data() + 1;
   out->resize(boundaries_m.size() - 1);
   for (std::size_t j = 0; j + 1 < boundaries_m.size(); ++j) {
-    if (tail[j] > threshold) {
-      // Telescoping Eq. 8: prod_{i in [a, b)} (1 - p(m_i)) = S_b / S_a.
-      (*out)[j] = std::clamp(1.0 - tail[j + 1] / tail[j], 0.0, 1.0);
-    } else {
-      (*out)[j] = PriorOccupancy(static_cast<double>(cells[j + 2] - cells[j + 1]) * cell);
-    }
+    (*out)[j] = IntervalOccupancyOfCells(tail[j], tail[j + 1], tails[0], cells[j + 2] - cells[j + 1]);
   }
+}
+
+std::uint32_t BeamGrid::CellOf(double range_m) const {
+  double c = std::round(range_m / impl_->options.cell_size_m);
+  if (!(c >= 0.0)) c = 0.0;  // NaN and negatives
+  return static_cast<std::uint32_t>(std::min(c, static_cast<double>(cells_per_beam())));
+}
+
+double BeamGrid::IntervalOccupancyOfCells(double tail_a, double tail_b, double total,
+                                          std::uint32_t cells) const {
+  if (tail_a > kNoInformationTail * total) {
+    // Telescoping Eq. 8: prod_{i in [a, b)} (1 - p(m_i)) = S_b / S_a.
+    return std::clamp(1.0 - tail_b / tail_a, 0.0, 1.0);
+  }
+  return PriorOccupancy(static_cast<double>(cells) * impl_->options.cell_size_m);
+}
+
+void BeamGrid::TailMassSpan(std::size_t beam, std::uint32_t first, std::uint32_t last,
+                            std::vector<double>* tails, double* total) const {
+  impl_->CheckBeam(beam);
+  const auto n = static_cast<std::uint32_t>(cells_per_beam());
+  first = std::min(first, n);
+  last = std::min(std::max(last, first), n);
+  thread_local std::vector<std::uint32_t> cells;
+  cells.resize(last - first + 2);
+  cells[0] = 0;
+  for (std::uint32_t c = first; c <= last; ++c) cells[c - first + 1] = c;
+  impl_->store->TailMasses(beam, cells, tails);
+  *total = tails->front();
+  tails->erase(tails->begin());
 }
 
 double BeamGrid::InformationEndM(std::size_t beam, double from_m, double fraction) const {

@@ -14,6 +14,8 @@ constexpr std::size_t kChunkSegments = 256;
 constexpr std::size_t kRowsPerBlock = 4;
 constexpr double kProbabilityFloor = 1e-9;
 constexpr double kPi = 3.14159265358979323846;
+// The longest stretch of a beam (cells) a tracer tabulates.
+constexpr std::uint32_t kMaxTableCells = 8192;
 
 double Logit(double p) {
   p = std::clamp(p, kProbabilityFloor, 1.0 - kProbabilityFloor);
@@ -87,9 +89,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
   // reached: the loop below stops there. Entering no voxel past that cell saves the traversal
   // and the interval lookups of a whole chunk behind every surface; the voxel holding the cell
   // is still crossed whole.
-  if (std::isnan(info_end_m)) {
-    info_end_m = grid_.InformationEndM(beam, t_ref - shift, options_.tail_mass);
-  }
+  if (std::isnan(info_end_m)) info_end_m = InformationEnd(beam, t_ref - shift);
   const double t_last_entry = std::min(t_end_, info_end_m + shift + cell_m_);
   t_first = std::max(t_first, t_ref);
   if (t_first >= t_last_entry) return t_last_entry;
@@ -123,7 +123,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
   double remaining_mass = 1.0;
   if (t_in > t_ref) {
     boundaries_.assign({t_ref - shift, t_in - shift});
-    grid_.IntervalOccupancy(beam, boundaries_, &occupancy_);
+    Occupancies(beam, boundaries_, &occupancy_);
     remaining_mass = 1.0 - occupancy_[0];
     if (remaining_mass < options_.tail_mass) return t_in;
   }
@@ -148,7 +148,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
     if (shift != 0.0) {
       for (double& b : boundaries_) b -= shift;
     }
-    grid_.IntervalOccupancy(beam, boundaries_, &occupancy_);
+    Occupancies(beam, boundaries_, &occupancy_);
     long c1 = std::lround(boundaries_[0] / cell_m_);
     for (std::size_t j = 0; j < keys_.size(); ++j) {
       const long c0 = c1;
@@ -170,6 +170,36 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
     if (t_in >= t_last_entry) done = true;
   }
   return t_in;
+}
+
+void BeamTracer::Occupancies(std::size_t beam, const std::vector<double>& boundaries_m,
+                             std::vector<double>* out) {
+  cells_.resize(boundaries_m.size());
+  std::uint32_t previous = 0;
+  for (std::size_t j = 0; j < boundaries_m.size(); ++j) {
+    cells_[j] = previous = std::max(previous, grid_.CellOf(boundaries_m[j]));  // as the grid
+  }
+  if (!table_.Covers(beam, cells_.front(), cells_.back())) {
+    grid_.IntervalOccupancy(beam, boundaries_m, out);
+    return;
+  }
+  out->resize(boundaries_m.size() - 1);
+  for (std::size_t j = 0; j + 1 < boundaries_m.size(); ++j) {
+    (*out)[j] = grid_.IntervalOccupancyOfCells(table_.S(cells_[j]), table_.S(cells_[j + 1]),
+                                               table_.total, cells_[j + 1] - cells_[j]);
+  }
+}
+
+double BeamTracer::InformationEnd(std::size_t beam, double from_m) {
+  const std::uint32_t from = grid_.CellOf(from_m);
+  if (table_.Covers(beam, from, from)) {
+    // BeamGrid::InformationEndM: the smallest cell after `from` whose S is below the fraction.
+    const double threshold = options_.tail_mass * table_.S(from);
+    for (std::uint32_t c = from + 1; c <= table_.last; ++c) {
+      if (table_.S(c) < threshold) return static_cast<double>(c) * cell_m_;
+    }
+  }
+  return grid_.InformationEndM(beam, from_m, options_.tail_mass);
 }
 
 double BeamTracer::VoxelEntry(const Eigen::Vector3d& dir, double r) const {
@@ -195,6 +225,25 @@ double BeamTracer::SurfaceStep(std::size_t beam, long neighbour, double spacing_
   return n - m;
 }
 
+void BeamTracer::SurfaceSteps(std::size_t beam, const BeamProfile& profile, double* left,
+                              double* right, double* up, double* down) const {
+  // Only the max rule: the mean and the pool weigh every segment of every sub-ray, and the
+  // surface's sub-rays would dilute them.
+  if (!options_.follow_surfaces || options_.combine != VoxelCombine::kMaxLogOdds ||
+      !std::isfinite(profile.median_m)) {
+    return;
+  }
+  const BeamTessellation& tess = grid_.tessellation();
+  const auto cols = static_cast<long>(tess.cols());
+  const auto rows = static_cast<long>(tess.rows());
+  const long b = static_cast<long>(beam);
+  const long col = b % cols, row = b / cols;
+  if (col > 0) *left = SurfaceStep(beam, b - 1, tess.beam_width_h_rad());
+  if (col + 1 < cols) *right = SurfaceStep(beam, b + 1, tess.beam_width_h_rad());
+  if (row > 0) *up = SurfaceStep(beam, b - cols, tess.beam_width_v_rad());  // elevation +
+  if (row + 1 < rows) *down = SurfaceStep(beam, b + cols, tess.beam_width_v_rad());
+}
+
 BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only,
                                 std::vector<Segment>* out) {
   const BeamTessellation& tess = grid_.tessellation();
@@ -207,6 +256,26 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only,
   const Eigen::Vector3d dir_sensor = tess.Direction(beam);
   const Eigen::Vector3d dir = R_ * dir_sensor;
   const std::size_t kept_from = out->size();
+  table_.valid = false;
+  double left = 0.0, right = 0.0, up = 0.0, down = 0.0;
+  SurfaceSteps(beam, profile, &left, &right, &up, &down);
+  if (first_mass_only && std::isfinite(mass_begin)) {
+    // Every ray of the beam reads the same stretch: from a voxel before where the mass starts
+    // (moved by the nearest sub-ray's shift) to a voxel after where it ends (the farthest shift).
+    const double reach = 0.5 * (std::max(std::abs(left), std::abs(right)) +
+                                std::max(std::abs(up), std::abs(down)));
+    const double margin = 2.0 * options_.resolution_m + cell_m_;
+    const double end = std::isfinite(profile.info_end_m) ? profile.info_end_m : t_end_;
+    const std::uint32_t lo = grid_.CellOf(mass_begin - reach - margin);
+    const std::uint32_t hi = grid_.CellOf(end + reach + margin);
+    if (hi > lo && hi - lo <= kMaxTableCells) {
+      grid_.TailMassSpan(beam, lo, hi, &table_.tails, &table_.total);
+      table_.beam = beam;
+      table_.first = lo;
+      table_.last = lo + static_cast<std::uint32_t>(table_.tails.size()) - 1;
+      table_.valid = true;
+    }
+  }
   const double t_stop =
       Trace(beam, dir, t_start_, first(t_start_, 0.0), 0.0, 1.0f, out, profile.info_end_m);
   trace.rays = 1;
@@ -216,20 +285,6 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only,
   const int k_width =
       std::clamp(static_cast<int>(std::ceil(width_rad_ * t_stop / options_.resolution_m)), 1,
                  std::max(1, options_.max_subrays_per_axis));
-  double left = 0.0, right = 0.0, up = 0.0, down = 0.0;
-  // Only the max rule: the mean and the pool weigh every segment of every sub-ray, and the
-  // surface's sub-rays would dilute them.
-  if (options_.follow_surfaces && options_.combine == VoxelCombine::kMaxLogOdds &&
-      std::isfinite(profile.median_m)) {
-    const auto cols = static_cast<long>(tess.cols());
-    const auto rows = static_cast<long>(tess.rows());
-    const long b = static_cast<long>(beam);
-    const long col = b % cols, row = b / cols;
-    if (col > 0) left = SurfaceStep(beam, b - 1, tess.beam_width_h_rad());
-    if (col + 1 < cols) right = SurfaceStep(beam, b + 1, tess.beam_width_h_rad());
-    if (row > 0) up = SurfaceStep(beam, b - cols, tess.beam_width_v_rad());  // elevation +
-    if (row + 1 < rows) down = SurfaceStep(beam, b + cols, tess.beam_width_v_rad());
-  }
   const int k_max = std::max(1, options_.max_surface_subrays_per_axis);
   const auto k_surface = [&](double minus, double plus) {
     const double span = 0.5 * (std::abs(minus) + std::abs(plus));
@@ -263,7 +318,7 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only,
   // Unshifted sub-rays from t_sub share their information end.
   const double unshifted_info_end = t_sub == t_start_ && !std::isnan(profile.info_end_m)
                                         ? profile.info_end_m
-                                        : grid_.InformationEndM(beam, t_sub, options_.tail_mass);
+                                        : InformationEnd(beam, t_sub);
   for (int i = 0; i < k_u; ++i) {
     const double fu = SubOffset(i, k_u);
     const double sub_az = az + fu * tess.beam_width_h_rad();

@@ -78,7 +78,28 @@ class BeamTracer {
   // Range change from beam b's surface to the neighbour's, 0 if the neighbour sees another
   // surface (a depth edge) or none.
   double SurfaceStep(std::size_t beam, long neighbour, double spacing_rad) const;
+  // The four steps (0 where no surface is followed) of beam b.
+  void SurfaceSteps(std::size_t beam, const BeamProfile& profile, double* left, double* right,
+                    double* up, double* down) const;
   double PriorLogOddsOfCells(long n);
+  // IntervalOccupancy and InformationEndM of the beam being traced, read from table_ where it
+  // covers the cells asked for (the same walk's numbers, so the same results).
+  void Occupancies(std::size_t beam, const std::vector<double>& boundaries_m,
+                   std::vector<double>* out);
+  double InformationEnd(std::size_t beam, double from_m);
+
+  // S over one stretch of the beam being traced (BeamGrid::TailMassSpan).
+  struct Table {
+    std::size_t beam = 0;
+    bool valid = false;
+    std::uint32_t first = 0, last = 0;
+    double total = 0.0;
+    std::vector<double> tails;
+    [[nodiscard]] bool Covers(std::size_t b, std::uint32_t lo, std::uint32_t hi) const {
+      return valid && b == beam && lo >= first && hi <= last;
+    }
+    [[nodiscard]] double S(std::uint32_t c) const { return tails[c - first]; }
+  };
 
   const BeamGrid& grid_;
   const RenderOptions& options_;
@@ -95,6 +116,8 @@ class BeamTracer {
   std::vector<double> boundaries_;
   std::vector<octomap::OcTreeKey> keys_;
   std::vector<double> occupancy_;
+  std::vector<std::uint32_t> cells_;
+  Table table_;
 };
 
 // Workers for a render of `rows` beam rows with RenderOptions::threads = threads (0: one per

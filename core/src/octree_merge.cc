@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <stdexcept>
 
 namespace fusion::detail {
 struct ChildArrayAccess {};
@@ -102,9 +103,21 @@ Cursor GridCursor(const MapNode* lo, const MapNode* hi, unsigned depth) {
   return c;
 }
 
-// Cursor of child `child` of a region at `depth` starting at `code`.
+// End of the nodes of [lo, hi) (ascending codes) that start before `code`: a short scan for
+// the few nodes a fine region holds, a binary search for many.
+const MapNode* Before(const MapNode* lo, const MapNode* hi, std::uint64_t code) {
+  if (hi - lo <= 16) {
+    while (lo != hi && lo->code < code) ++lo;
+    return lo;
+  }
+  return std::lower_bound(lo, hi, code,
+                          [](const MapNode& n, std::uint64_t c) { return n.code < c; });
+}
+
+// Cursor of child `child` of a region at `depth` starting at `code`. For a grid, `*next` is
+// where the child's nodes begin (the end of the previous child's); it is moved past them.
 Cursor ChildCursor(const Cursor& parent, const octomap::OcTree* tree, unsigned depth,
-                   std::uint64_t code, unsigned child) {
+                   std::uint64_t code, unsigned child, const MapNode** next) {
   switch (parent.kind) {
     case Cursor::kNone:
     case Cursor::kUniform:
@@ -114,11 +127,10 @@ Cursor ChildCursor(const Cursor& parent, const octomap::OcTree* tree, unsigned d
                                    ? tree->getNodeChild(parent.node, child)
                                    : nullptr);
     case Cursor::kGrid: {
-      const std::uint64_t span = MortonSpan(depth + 1);
-      const std::uint64_t begin = code + child * span;
-      const auto before = [](const MapNode& n, std::uint64_t c) { return n.code < c; };
-      const MapNode* lo = std::lower_bound(parent.lo, parent.hi, begin, before);
-      const MapNode* hi = std::lower_bound(lo, parent.hi, begin + span, before);
+      const std::uint64_t end = code + (child + 1) * MortonSpan(depth + 1);
+      const MapNode* lo = *next;
+      const MapNode* hi = Before(lo, parent.hi, end);
+      *next = hi;
       return GridCursor(lo, hi, depth + 1);
     }
   }
@@ -129,6 +141,8 @@ Cursor ChildCursor(const Cursor& parent, const octomap::OcTree* tree, unsigned d
 class Merge {
  public:
   enum class Mode { kFuse, kCopy };
+  static constexpr std::size_t kMaxInputs = 16;
+
   Merge(octomap::OcTree& target, Mode mode, const FusionPolicy& policy,
         std::vector<const octomap::OcTree*> source_trees, std::vector<MapRegion>* changed)
       : target_(target),
@@ -138,27 +152,37 @@ class Merge {
         changed_(changed) {}
 
   void Run(const std::vector<Cursor>& sources, const std::vector<Cursor>& drivers) {
-    Visit(0, 0, nullptr, 0, sources, drivers);
+    if (sources.size() > kMaxInputs || drivers.size() > kMaxInputs) {
+      throw std::invalid_argument("FuseRegions: at most 16 sources and 16 drivers");
+    }
+    n_sources_ = sources.size();
+    n_drivers_ = drivers.size();
+    std::copy(sources.begin(), sources.end(), levels_[0].sources.begin());
+    std::copy(drivers.begin(), drivers.end(), levels_[0].drivers.begin());
+    Visit(0, 0, nullptr, 0);
   }
 
  private:
-  void Visit(unsigned depth, std::uint64_t code, Node* parent, unsigned index,
-             const std::vector<Cursor>& sources, const std::vector<Cursor>& drivers) {
+  // The cursors of the region being visited at each depth.
+  struct Level {
+    std::array<Cursor, kMaxInputs> sources;
+    std::array<Cursor, kMaxInputs> drivers;
+  };
+
+  void Visit(unsigned depth, std::uint64_t code, Node* parent, unsigned index) {
+    const Level& here = levels_[depth];
     bool covered = false;
-    bool partial = false;
-    for (const Cursor& d : drivers) {
-      covered |= d.kind == Cursor::kUniform;
-      partial |= d.kind == Cursor::kGrid;
-    }
-    if (!covered && !partial) return;
+    for (std::size_t i = 0; i < n_drivers_; ++i) covered |= here.drivers[i].kind == Cursor::kUniform;
     bool uniform = true;
-    for (const Cursor& s : sources) uniform &= s.kind == Cursor::kNone || s.kind == Cursor::kUniform;
+    for (std::size_t i = 0; i < n_sources_; ++i) {
+      uniform &= here.sources[i].kind == Cursor::kNone || here.sources[i].kind == Cursor::kUniform;
+    }
     Node* node = parent == nullptr
                      ? target_.getRoot()
                      : (target_.nodeChildExists(parent, index) ? target_.getNodeChild(parent, index)
                                                                : nullptr);
     if (covered && uniform) {
-      Write(depth, code, parent, index, node, sources);
+      Write(depth, code, parent, index, node, here);
       return;
     }
     // Descend: the target's node here must exist and have its children (a leaf is split, its
@@ -168,34 +192,34 @@ class Merge {
     } else if (!target_.nodeHasChildren(node)) {
       target_.expandNode(node);
     }
-    std::vector<Cursor> child_sources(sources.size());
-    std::vector<Cursor> child_drivers(drivers.size());
+    Level& below = levels_[depth + 1];
+    std::array<const MapNode*, kMaxInputs> next_source, next_driver;
+    for (std::size_t i = 0; i < n_sources_; ++i) next_source[i] = here.sources[i].lo;
+    for (std::size_t i = 0; i < n_drivers_; ++i) next_driver[i] = here.drivers[i].lo;
+    const std::uint64_t span = MortonSpan(depth + 1);
     for (unsigned child = 0; child < 8; ++child) {
-      for (std::size_t i = 0; i < sources.size(); ++i) {
-        child_sources[i] = ChildCursor(sources[i], source_trees_[i], depth, code, child);
+      bool driven = false;
+      for (std::size_t i = 0; i < n_drivers_; ++i) {
+        below.drivers[i] = ChildCursor(here.drivers[i], nullptr, depth, code, child, &next_driver[i]);
+        driven |= below.drivers[i].kind != Cursor::kNone;
       }
-      for (std::size_t i = 0; i < drivers.size(); ++i) {
-        child_drivers[i] = ChildCursor(drivers[i], nullptr, depth, code, child);
+      // Sources are read on: a grid's next child starts where this one ends.
+      for (std::size_t i = 0; i < n_sources_; ++i) {
+        below.sources[i] =
+            ChildCursor(here.sources[i], source_trees_[i], depth, code, child, &next_source[i]);
       }
-      Visit(depth + 1, code + child * MortonSpan(depth + 1), node, child, child_sources,
-            child_drivers);
+      if (driven) Visit(depth + 1, code + child * span, node, child);
     }
     Settle(parent, index, node);
   }
 
   // The region's value from uniform sources (or nothing).
   void Write(unsigned depth, std::uint64_t code, Node* parent, unsigned index, Node* node,
-             const std::vector<Cursor>& sources) {
-    std::array<float, 16> values{};
-    std::vector<float> many;
-    float* v = values.data();
-    if (sources.size() > values.size()) {
-      many.resize(sources.size());
-      v = many.data();
-    }
+             const Level& here) {
+    std::array<float, kMaxInputs> v{};
     std::size_t n = 0;
-    for (const Cursor& s : sources) {
-      if (s.kind == Cursor::kUniform) v[n++] = s.value;
+    for (std::size_t i = 0; i < n_sources_; ++i) {
+      if (here.sources[i].kind == Cursor::kUniform) v[n++] = here.sources[i].value;
     }
     if (n == 0) {
       if (node == nullptr) return;
@@ -207,7 +231,7 @@ class Merge {
       Changed(depth, code);
       return;
     }
-    const float value = mode_ == Mode::kCopy ? v[0] : policy_.Fuse(v, n);
+    const float value = mode_ == Mode::kCopy ? v[0] : policy_.Fuse(v.data(), n);
     if (node != nullptr && !target_.nodeHasChildren(node) && node->getLogOdds() == value) return;
     if (node == nullptr) {
       node = parent == nullptr ? EnsureRoot(target_) : target_.createNodeChild(parent, index);
@@ -241,6 +265,8 @@ class Merge {
   const FusionPolicy& policy_;
   std::vector<const octomap::OcTree*> source_trees_;
   std::vector<MapRegion>* changed_;
+  std::size_t n_sources_ = 0, n_drivers_ = 0;
+  std::array<Level, kTreeDepth + 2> levels_;
 };
 
 std::vector<Cursor> Roots(const std::vector<MergeSource>& sources,
@@ -330,9 +356,13 @@ void ForEachInRegion(
 }
 
 void NormaliseRegions(std::vector<MapRegion>* regions) {
-  std::sort(regions->begin(), regions->end(), [](const MapRegion& a, const MapRegion& b) {
+  const auto before = [](const MapRegion& a, const MapRegion& b) {
     return a.code != b.code ? a.code < b.code : a.depth < b.depth;
-  });
+  };
+  // A merge reports its regions in order already: then only nested ones need to go.
+  if (!std::is_sorted(regions->begin(), regions->end(), before)) {
+    std::sort(regions->begin(), regions->end(), before);
+  }
   std::size_t kept = 0;
   std::uint64_t covered_end = 0;
   bool any = false;

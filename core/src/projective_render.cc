@@ -21,6 +21,28 @@ constexpr int kExactBeams = 32;
 constexpr double kTanEps = 1e-5;
 
 double Square(double v) { return v * v; }
+#ifdef FUSION_COUNT
+}
+std::size_t g_counts[17][3][2];
+namespace {
+#endif
+
+// Lattice indices (i, j, k) of the 27 corners of a block's eight children, point n = i + 3 j +
+// 9 k, four at a time (the 28th repeats the origin).
+using F4c = float __attribute__((vector_size(16)));
+constexpr F4c kLatticeI[7] = {{0, 1, 2, 0}, {1, 2, 0, 1}, {2, 0, 1, 2}, {0, 1, 2, 0},
+                              {1, 2, 0, 1}, {2, 0, 1, 2}, {0, 1, 2, 0}};
+constexpr F4c kLatticeJ[7] = {{0, 0, 0, 1}, {1, 1, 2, 2}, {2, 0, 0, 0}, {1, 1, 1, 2},
+                              {2, 2, 0, 0}, {0, 1, 1, 1}, {2, 2, 2, 0}};
+// The lattice points (i + 3 j + 9 k) at the corners of each child (child c: i, j, k offsets from
+// its bits).
+constexpr int kChildCorners[8][8] = {
+    {0, 1, 3, 4, 9, 10, 12, 13},     {1, 2, 4, 5, 10, 11, 13, 14},
+    {3, 4, 6, 7, 12, 13, 15, 16},    {4, 5, 7, 8, 13, 14, 16, 17},
+    {9, 10, 12, 13, 18, 19, 21, 22}, {10, 11, 13, 14, 19, 20, 22, 23},
+    {12, 13, 15, 16, 21, 22, 24, 25}, {13, 14, 16, 17, 22, 23, 25, 26}};
+constexpr F4c kLatticeK[7] = {{0, 0, 0, 0}, {0, 0, 0, 0}, {0, 1, 1, 1}, {1, 1, 1, 1},
+                              {1, 1, 2, 2}, {2, 2, 2, 2}, {2, 2, 2, 0}};
 
 // What the pyramid keeps of a set of beams (one beam at level 0).
 struct Aggregate {
@@ -43,7 +65,7 @@ struct Aggregate {
 };
 
 // Min / max images of the beam grid, halved level by level: a rectangle of beams is answered
-// from at most 2 x 2 cells of the level where its larger side fits one cell.
+// from at most 5 x 5 cells of the level where its larger side spans four cells.
 class BeamPyramid {
  public:
   BeamPyramid(int cols, int rows, std::vector<Aggregate> beams) {
@@ -72,7 +94,8 @@ class BeamPyramid {
     const int h = r1 - r0 + 1;
     std::size_t l = 0;
     if (w * h > kExactBeams) {
-      while ((1 << l) < std::max(w, h)) ++l;
+      // The coarsest level whose cells still give a bound within 4 x 4 cells of the rectangle.
+      while ((4 << l) < std::max(w, h)) ++l;
       l = std::min(l, levels_.size() - 1);
     }
     const Level& level = levels_[l];
@@ -100,8 +123,12 @@ class Descent {
  public:
   Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
           const RenderOptions& options, const BeamPyramid& pyramid, const LocalGrid& traced,
-          double t_start, float global_far, RenderedGrid* out, RenderStats* stats)
+          double t_start, float global_far, const SaturatedFree* skip, RenderedGrid* out,
+          RenderStats* stats)
       : tess_(grid.tessellation()),
+        skip_(skip != nullptr && skip->history != nullptr && skip->others.size() <= kMaxOthers
+                  ? skip
+                  : nullptr),
         options_(options),
         pyramid_(pyramid),
         traced_(traced),
@@ -139,8 +166,30 @@ class Descent {
   }
 
   // Visits the children of a block that is neither wholly free nor wholly unknown.
-  void VisitChildren(unsigned depth, const std::array<int, 3>& key_min,
-                     const Aggregate* free_through) {
+  // `beams` is what the pyramid said of this block (a superset of every child's beams):
+  // voxels are classified from it, only the voxels it leaves undecided look closer.
+  // The map's history over this block, and the other live contributions' nodes in it (see
+  // SaturatedFree).
+  struct MapHere {
+    const octomap::OcTreeNode* history = nullptr;
+    std::array<const MapNode*, 8> lo{}, hi{};
+    bool others_cover = false;  // an other contribution's node covers the whole block
+  };
+  MapHere RootMap() const {
+    MapHere m;
+    if (skip_ == nullptr) return m;
+    m.history = skip_->history->getRoot();
+    for (std::size_t i = 0; i < skip_->others.size(); ++i) {
+      const auto& nodes = skip_->others[i]->nodes();
+      m.lo[i] = nodes.data();
+      m.hi[i] = nodes.data() + nodes.size();
+      if (!nodes.empty() && nodes.front().depth == 0) m.others_cover = true;
+    }
+    return m;
+  }
+
+  void VisitChildren(unsigned depth, const std::array<int, 3>& key_min, const Aggregate& beams,
+                     bool free_through, const MapHere& map) {
     const unsigned child_depth = depth + 1;
     const int half = 1 << (kTreeDepth - child_depth);
     const double res = options_.resolution_m;
@@ -153,31 +202,37 @@ class Descent {
     const Eigen::Matrix3d step = Rt_ * child_size;
     // Azimuth tangent x / z and the elevation tangent's signed square y |y| / (x^2 + z^2) (no
     // square root), four lattice points at a time.
-    alignas(16) float px[28], py[28], pz[28], az[28], el[28];
-    for (int n = 0; n < 27; ++n) {
-      const int i = n % 3, j = (n / 3) % 3, k = n / 9;
-      const Eigen::Vector3d p = base + step.col(0) * i + step.col(1) * j + step.col(2) * k;
-      px[n] = static_cast<float>(p.x());
-      py[n] = static_cast<float>(p.y());
-      pz[n] = static_cast<float>(p.z());
-    }
-    px[27] = py[27] = 0.0f;
-    pz[27] = 1.0f;
+    // The lattice is built on vectors too (scalar stores read back as vectors stall).
     using F4 = float __attribute__((vector_size(16)));
+    alignas(16) float pz[28], az[28], el[28];
     const F4 tiny = {1e-6f, 1e-6f, 1e-6f, 1e-6f};
     const F4 one = {1.0f, 1.0f, 1.0f, 1.0f};
+    const auto splat = [](double v) {
+      const auto f = static_cast<float>(v);
+      return F4{f, f, f, f};
+    };
     for (int n = 0; n < 28; n += 4) {
-      F4 x, y, z;
-      std::memcpy(&x, px + n, sizeof x);
-      std::memcpy(&y, py + n, sizeof y);
-      std::memcpy(&z, pz + n, sizeof z);
-      z = z > tiny ? z : one;
-      const F4 a = x / z;
+      const F4& i = kLatticeI[n / 4];
+      const F4& j = kLatticeJ[n / 4];
+      const F4& k = kLatticeK[n / 4];
+      const F4 x = splat(base.x()) + i * splat(step(0, 0)) + j * splat(step(0, 1)) +
+                   k * splat(step(0, 2));
+      const F4 y = splat(base.y()) + i * splat(step(1, 0)) + j * splat(step(1, 1)) +
+                   k * splat(step(1, 2));
+      const F4 z = splat(base.z()) + i * splat(step(2, 0)) + j * splat(step(2, 1)) +
+                   k * splat(step(2, 2));
+      const F4 zs = z > tiny ? z : one;
+      const F4 a = x / zs;
       const F4 ny = -y;
-      const F4 e = ny * (ny < 0 ? -ny : ny) / (x * x + z * z);
+      const F4 e = ny * (ny < 0 ? -ny : ny) / (x * x + zs * zs);
+      std::memcpy(pz + n, &z, sizeof z);
       std::memcpy(az + n, &a, sizeof a);
       std::memcpy(el + n, &e, sizeof e);
     }
+    // Per point {azimuth tangent, elevation's signed square, z, -z}: a child's ranges are then
+    // the lane-wise minimum and maximum of its eight corners.
+    F4 point[27];
+    for (int n = 0; n < 27; ++n) point[n] = F4{az[n], el[n], pz[n], -pz[n]};
     // Per axis, the offsets of the two child slabs from the sensor: their nearest and farthest
     // squared distances.
     double near2[3][2], far2[3][2];
@@ -191,41 +246,48 @@ class Descent {
         far2[a][c] = f * f;
       }
     }
+    std::array<const MapNode*, 8> next = map.lo;
     for (int child = 0; child < 8; ++child) {
       const int cx = child & 1, cy = (child >> 1) & 1, cz = (child >> 2) & 1;
+      const MapHere child_map = ChildMap(map, depth, key_min, child, &next);
       Box box;
       box.size = child_size;
       box.lo = lo + Eigen::Vector3d(cx, cy, cz) * child_size;
       box.r_lo2 = near2[0][cx] + near2[1][cy] + near2[2][cz];
       box.r_hi2 = far2[0][cx] + far2[1][cy] + far2[2][cz];
       if (box.r_hi2 <= t_start2_ || box.r_lo2 >= global_far2_) continue;
-      float az_lo = std::numeric_limits<float>::infinity(), az_hi = -az_lo;
-      float el_lo = az_lo, el_hi = -az_lo, z_max = -az_lo, z_min = az_lo;
-      for (int corner = 0; corner < 8; ++corner) {
-        const int n = (cx + (corner & 1)) + 3 * (cy + ((corner >> 1) & 1)) + 9 * (cz + (corner >> 2));
-        z_max = std::max(z_max, pz[n]);
-        z_min = std::min(z_min, pz[n]);
-        az_lo = std::min(az_lo, az[n]);
-        az_hi = std::max(az_hi, az[n]);
-        el_lo = std::min(el_lo, el[n]);
-        el_hi = std::max(el_hi, el[n]);
+      const int* corners = kChildCorners[child];
+      F4 lo4 = point[corners[0]], hi4 = lo4;
+      for (int c = 1; c < 8; ++c) {
+        const F4 q = point[corners[c]];
+        lo4 = lo4 < q ? lo4 : q;
+        hi4 = hi4 > q ? hi4 : q;
       }
-      box.z_max = z_max;
-      box.ahead = z_min > 1e-6f;
+      const float az_lo = lo4[0], el_lo = lo4[1], az_hi = hi4[0], el_hi = hi4[1];
+      box.z_max = hi4[2];
+      box.ahead = -hi4[3] > 1e-6f;  // the smallest z
       box.az_lo = az_lo - kTanEps;
       box.az_hi = az_hi + kTanEps;
       box.el_lo = std::copysign(std::sqrt(std::abs(el_lo)), el_lo) - kTanEps;
       box.el_hi = std::copysign(std::sqrt(std::abs(el_hi)), el_hi) + kTanEps;
       const std::array<int, 3> k = {key_min[0] + cx * half, key_min[1] + cy * half,
                                     key_min[2] + cz * half};
-      const Verdict v = Classify(child_depth, box, free_through);
+      const Verdict v = Classify(child_depth, box, beams, free_through);
+      if (Saturated(child_map) &&
+          (v.kind == Kind::kFree || (v.kind == Kind::kMixed && v.free_through))) {
+        ++stats_->skipped_saturated;
+        continue;  // free where the map is held free at the clamp already
+      }
+#ifdef FUSION_COUNT
+      ++g_counts[child_depth][int(v.kind)][free_through ? 1 : 0];
+#endif
       if (v.kind == Kind::kUnknown) continue;
       if (v.kind == Kind::kFree) {
         Emit(child_depth, k, v.free_value);
       } else if (child_depth == kTreeDepth) {
-        VisitVoxel(k, box, v);
+        VisitVoxel(k, box, v, Saturated(child_map));
       } else {
-        VisitChildren(child_depth, k, v.free_through ? &v.beams : nullptr);
+        VisitChildren(child_depth, k, v.beams, v.free_through, child_map);
       }
     }
   }
@@ -241,6 +303,55 @@ class Descent {
     double z_max = 0.0;  // along the optical axis
     double az_lo = 0.0, az_hi = 0.0, el_lo = 0.0, el_hi = 0.0;  // tangents over the corners
   };
+  static constexpr std::size_t kMaxOthers = 8;
+
+  MapHere ChildMap(const MapHere& map, unsigned depth, const std::array<int, 3>& key_min,
+                   int child, std::array<const MapNode*, 8>* next) const {
+    MapHere c;
+    if (skip_ == nullptr) return c;
+    const octomap::OcTree& tree = *skip_->history;
+    if (map.history != nullptr) {
+      if (!tree.nodeHasChildren(map.history)) {
+        c.history = map.history;  // a coarser leaf holds the child
+      } else if (tree.nodeChildExists(map.history, static_cast<unsigned>(child))) {
+        c.history = tree.getNodeChild(map.history, static_cast<unsigned>(child));
+      }
+    }
+    c.others_cover = map.others_cover;
+    if (c.others_cover) return c;
+    const octomap::OcTreeKey k(static_cast<octomap::key_type>(key_min[0]),
+                               static_cast<octomap::key_type>(key_min[1]),
+                               static_cast<octomap::key_type>(key_min[2]));
+    const std::uint64_t end = MortonOf(k) + (child + 1) * MortonSpan(depth + 1);
+    for (std::size_t i = 0; i < skip_->others.size(); ++i) {
+      const MapNode* lo = (*next)[i];
+      const MapNode* hi =
+          map.hi[i] - lo <= 16
+              ? std::find_if(lo, map.hi[i], [end](const MapNode& n) { return n.code >= end; })
+              : std::lower_bound(lo, map.hi[i], end,
+                                 [](const MapNode& n, std::uint64_t e) { return n.code < e; });
+      (*next)[i] = hi;
+      c.lo[i] = lo;
+      c.hi[i] = hi;
+      if (lo != hi && lo->depth <= depth + 1) c.others_cover = true;
+    }
+    return c;
+  }
+
+  // The history holds the whole block at or below the free clamp, and no other live
+  // contribution says anything there.
+  bool Saturated(const MapHere& m) const {
+    if (skip_ == nullptr || m.history == nullptr || m.others_cover) return false;
+    if (skip_->history->nodeHasChildren(m.history) ||
+        m.history->getLogOdds() > skip_->clamp_min_log_odds) {
+      return false;
+    }
+    for (std::size_t i = 0; i < skip_->others.size(); ++i) {
+      if (m.lo[i] != m.hi[i]) return false;
+    }
+    return true;
+  }
+
   // Tangent bounds of the field of view, each side moved in by `inset` beam widths.
   struct TanBounds {
     double az_min, az_max, el_min, el_max;
@@ -272,7 +383,7 @@ class Descent {
     Aggregate beams;
   };
 
-  Verdict Classify(unsigned depth, Box& box, const Aggregate* free_through) const {
+  Verdict Classify(unsigned depth, Box& box, const Aggregate& parent, bool free_through) const {
     Verdict v;
     const bool voxel = depth == kTreeDepth;
     // Outside the cone that holds the field of view.
@@ -289,8 +400,9 @@ class Descent {
     box.el_hi += margin * (1.0 + box.el_hi * box.el_hi);
     if (!fov_.Overlaps(box)) return v;
     const bool in_known = KnownAt(box.r_lo2).Holds(box) && KnownAt(box.r_hi2).Holds(box);
-    if (free_through != nullptr) {
-      v.beams = *free_through;
+    if (free_through || voxel) {
+      v.beams = parent;
+      if (v.beams.touched == 0 || box.r_lo2 >= Square(v.beams.max_far)) return v;
     } else {
       v.beams = pyramid_.Query(tess_.ColumnOfTangent(box.az_lo), tess_.ColumnOfTangent(box.az_hi),
                                tess_.RowOfTangent(box.el_hi), tess_.RowOfTangent(box.el_lo));
@@ -313,28 +425,39 @@ class Descent {
   // reach the voxel if its centre line does (its direction lies in the voxel's angular box);
   // beyond r_split, where beams are wider than voxels and traced with sub-rays, if the voxel
   // overlaps its sector.
-  void VisitVoxel(const std::array<int, 3>& key_min, const Box& box, const Verdict& v) {
+  void VisitVoxel(const std::array<int, 3>& key_min, const Box& box, const Verdict& v,
+                  bool saturated) {
     const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
                                  static_cast<octomap::key_type>(key_min[1]),
                                  static_cast<octomap::key_type>(key_min[2]));
     // A voxel free in every beam it overlaps holds no traced segment.
     if (const auto traced = v.free_through ? std::nullopt : traced_.LogOddsOf(key)) {
-      Emit(kTreeDepth, key_min, static_cast<float>(*traced));
+      if (saturated && *traced <= 0.0) {
+        ++stats_->skipped_saturated;
+      } else {
+        Emit(kTreeDepth, key_min, static_cast<float>(*traced));
+      }
+      return;
+    }
+    if (saturated) {  // free at most, where the map holds free at the clamp already
+      ++stats_->skipped_saturated;
       return;
     }
     if (!KnownAt(box.r_hi2).Overlaps(box) || box.r_hi2 <= t_start2_) return;
-    Aggregate reach = v.beams;
-    if (box.r_hi2 <= r_split2_) {
-      const auto c0 = std::lower_bound(col_centres_.begin(), col_centres_.end(), box.az_lo);
-      const auto c1 = std::upper_bound(c0, col_centres_.end(), box.az_hi);
-      // Row centres fall with the row index.
-      const auto r0 = std::lower_bound(row_centres_.begin(), row_centres_.end(), box.el_hi,
-                                       std::greater<double>());
-      const auto r1 = std::upper_bound(r0, row_centres_.end(), box.el_lo, std::greater<double>());
-      reach = CentreLinesThrough(box, static_cast<int>(c0 - col_centres_.begin()),
-                                 static_cast<int>(c1 - col_centres_.begin()),
-                                 static_cast<int>(r0 - row_centres_.begin()),
-                                 static_cast<int>(r1 - row_centres_.begin()));
+    Aggregate reach;
+    if (box.r_hi2 > r_split2_) {
+      reach = pyramid_.Query(tess_.ColumnOfTangent(box.az_lo), tess_.ColumnOfTangent(box.az_hi),
+                             tess_.RowOfTangent(box.el_hi), tess_.RowOfTangent(box.el_lo));
+    } else {
+      // The beams whose centre direction lies in the box: the beams holding its corners, less an
+      // edge beam whose centre lies outside.
+      int c0 = tess_.ColumnOfTangent(box.az_lo), c1 = tess_.ColumnOfTangent(box.az_hi);
+      int r0 = tess_.RowOfTangent(box.el_hi), r1 = tess_.RowOfTangent(box.el_lo);
+      if (col_centres_[c0] < box.az_lo) ++c0;
+      if (col_centres_[c1] > box.az_hi) --c1;
+      if (row_centres_[r0] > box.el_hi) ++r0;  // row centres fall with the row index
+      if (row_centres_[r1] < box.el_lo) --r1;
+      reach = CentreLinesThrough(box, c0, c1 + 1, r0, r1 + 1);
     }
     if (reach.touched != 0 && box.r_lo2 < Square(reach.max_free_end)) {
       Emit(kTreeDepth, key_min, reach.max_free_value);
@@ -351,22 +474,27 @@ class Descent {
     if (all.touched == 0 || box.r_lo2 >= Square(all.max_free_end)) return out;
     const Eigen::Vector3d lo = box.lo - origin_;
     const Eigen::Vector3d hi = lo + Eigen::Vector3d::Constant(box.size);
+    const auto crosses = [&](int c, int r) {
+      const Aggregate& beam = pyramid_.Beam(c, r);
+      if (beam.touched == 0 || box.r_lo2 >= Square(beam.max_free_end)) return false;
+      const Eigen::Vector3f& d = WorldDirection(static_cast<std::size_t>(r) * tess_.cols() + c);
+      double t_in = 0.0, t_out = std::numeric_limits<double>::infinity();
+      for (int a = 0; a < 3 && t_in <= t_out; ++a) {
+        if (d[a] == 0.0f) {
+          if (lo[a] > 0.0 || hi[a] < 0.0) return false;
+          continue;
+        }
+        const double ta = lo[a] / d[a], tb = hi[a] / d[a];
+        t_in = std::max(t_in, std::min(ta, tb));
+        t_out = std::min(t_out, std::max(ta, tb));
+      }
+      return t_in <= t_out;
+    };
+    // The middle beam's line is the likeliest to cross.
+    if (crosses((c0 + c1 - 1) / 2, (r0 + r1 - 1) / 2)) return all;
     for (int r = r0; r < r1; ++r) {
       for (int c = c0; c < c1; ++c) {
-        const Aggregate& beam = pyramid_.Beam(c, r);
-        if (beam.touched == 0 || box.r_lo2 >= Square(beam.max_free_end)) continue;
-        const Eigen::Vector3f& d = WorldDirection(static_cast<std::size_t>(r) * tess_.cols() + c);
-        double t_in = 0.0, t_out = std::numeric_limits<double>::infinity();
-        for (int a = 0; a < 3 && t_in <= t_out; ++a) {
-          if (d[a] == 0.0f) {
-            if (lo[a] > 0.0 || hi[a] < 0.0) t_in = t_out + 1.0;
-            continue;
-          }
-          const double ta = lo[a] / d[a], tb = hi[a] / d[a];
-          t_in = std::max(t_in, std::min(ta, tb));
-          t_out = std::min(t_out, std::max(ta, tb));
-        }
-        if (t_in <= t_out) return all;
+        if (crosses(c, r)) return all;
       }
     }
     return out;
@@ -398,6 +526,7 @@ class Descent {
   }
 
   const BeamTessellation& tess_;
+  const SaturatedFree* skip_;
   const RenderOptions& options_;
   const BeamPyramid& pyramid_;
   const LocalGrid& traced_;
@@ -422,7 +551,8 @@ class Descent {
 }  // namespace
 
 RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-                              const RenderOptions& options, RenderStats* stats) {
+                              const RenderOptions& options, RenderStats* stats,
+                              const SaturatedFree* skip) {
   const BeamTessellation& tess = grid.tessellation();
   if (!tess.HasTangentEdges()) {
     return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
@@ -490,21 +620,24 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
   const BeamPyramid pyramid(tess.cols(), tess.rows(), std::move(beams));
   RenderedGrid out(options.resolution_m);
   if (s.beams_rendered > 0) {
-    Descent descent(grid, T_world_sensor, options, pyramid, traced, t_start, global_far, &out, &s);
-    descent.VisitChildren(0, {0, 0, 0}, nullptr);
+    Descent descent(grid, T_world_sensor, options, pyramid, traced, t_start, global_far, skip,
+                    &out, &s);
+    Aggregate everything;
+    everything.touched = everything.beams = 1;
+    descent.VisitChildren(0, {0, 0, 0}, everything, /*free_through=*/false, descent.RootMap());
   }
   if (stats != nullptr) *stats = s;
   return out;
 }
 
 RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-                    const RenderOptions& options, RenderStats* stats) {
+                    const RenderOptions& options, RenderStats* stats, const SaturatedFree* skip) {
   // The mean and the pool of a voxel's segments need every crossing of every ray, free ones
   // included: only the max rule lets the free zones be decided block by block.
   if (options.method == RenderMethod::kRayTraced || options.combine != VoxelCombine::kMaxLogOdds) {
     return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
   }
-  return RenderProjective(grid, T_world_sensor, options, stats);
+  return RenderProjective(grid, T_world_sensor, options, stats, skip);
 }
 
 }  // namespace fusion

@@ -43,7 +43,8 @@ std::unique_ptr<Period> SensorPeriods::NewPeriod() {
     p->frames = p->merged_frames = 0;
   } else {
     p = std::make_unique<Period>();
-    p->grid = std::make_unique<BeamGrid>(spec_, grid_options_);
+    // Every grid of the sensor shares the first one's forward-model tables.
+    p->grid = open_ ? open_->grid->EmptyCopy() : std::make_unique<BeamGrid>(spec_, grid_options_);
   }
   p->sequence = ++sequence_;
   return p;
@@ -70,8 +71,9 @@ MapStatus SensorPeriods::Integrate(const Eigen::Isometry3d& T_world_sensor,
   const float* points = points_xyz;
   if (open_->frames > 0 && Moved(T_world_sensor)) {
     if (may_seal) {
+      std::unique_ptr<Period> next = NewPeriod();
       *sealed = std::move(open_);
-      open_ = NewPeriod();
+      open_ = std::move(next);
     } else {
       // Into the open period's frame; NaN stays NaN (no return), so does every count.
       const Eigen::Isometry3d T_open_cloud = open_->T_world_sensor.inverse() * T_world_sensor;
@@ -96,13 +98,14 @@ MapStatus SensorPeriods::Integrate(const Eigen::Isometry3d& T_world_sensor,
 
 std::unique_ptr<Period> SensorPeriods::Seal() {
   if (open_->frames == 0) return nullptr;
+  std::unique_ptr<Period> next = NewPeriod();
   std::unique_ptr<Period> sealed = std::move(open_);
-  open_ = NewPeriod();
+  open_ = std::move(next);
   return sealed;
 }
 
 void SensorPeriods::Recycle(std::unique_ptr<Period> period) {
-  if (!period || spare_) return;
+  if (!period || spare_) return;  // one spare is enough: the rest go
   period->grid->Reset();
   spare_ = std::move(period);
 }

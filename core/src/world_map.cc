@@ -1,5 +1,6 @@
 #include "fusion/core/world_map.h"
 
+#include <algorithm>
 #include <utility>
 
 #include "fusion/core/octree_merge.h"
@@ -116,9 +117,22 @@ MapStatus WorldMap::ReplaceLive(const std::string& sensor_id, RenderedGrid rende
   s->live = std::move(rendered);
   const std::size_t before = pending_.size();
   FuseRegions(Working(), policy_, Sources(nullptr), {&old, &s->live}, &pending_);
+  MergeRun(before);
   s->counters.live_nodes = s->live.size();
   if (stats != nullptr) stats->regions_changed = pending_.size() - before;
   return MapStatus::kOk;
+}
+
+SaturatedFree WorldMap::Saturation(const std::string& sensor_id) const {
+  SaturatedFree saturated;
+  // Eq. 16 only: under max or De Morgan a free value above the clamp still moves the map.
+  if (options_.rule != FusionRule::kIndependentOpinionPool) return saturated;
+  saturated.history = committed_.get();
+  saturated.clamp_min_log_odds = policy_.clamp_min_log_odds;
+  for (const auto& [id, s] : sensors_) {
+    if (id != sensor_id && !s->live.empty()) saturated.others.push_back(&s->live);
+  }
+  return saturated;
 }
 
 MapStatus WorldMap::CommitLive(const std::string& sensor_id) {
@@ -133,7 +147,9 @@ MapStatus WorldMap::CommitLive(const std::string& sensor_id) {
   // Where no other live contribution overlaps, the map already holds what the history now
   // holds: both are Fuse(history before, this contribution).
   if (Sources(nullptr).size() > 1) {
+    const std::size_t before = pending_.size();
     FuseRegions(Working(), policy_, Sources(nullptr), {&old}, &pending_);
+    MergeRun(before);
   }
   return MapStatus::kOk;
 }
@@ -159,6 +175,15 @@ void WorldMap::Reset() {
     s->counters.live_nodes = 0;
     if (s->periods) s->periods->Reset();
   }
+}
+
+void WorldMap::MergeRun(std::size_t run_begin) {
+  // Each merge reports its regions in order: keep the version's list one ordered run.
+  const auto before = [](const MapRegion& a, const MapRegion& b) {
+    return a.code != b.code ? a.code < b.code : a.depth < b.depth;
+  };
+  std::inplace_merge(pending_.begin(), pending_.begin() + static_cast<std::ptrdiff_t>(run_begin),
+                     pending_.end(), before);
 }
 
 Publication WorldMap::Publish() {
@@ -200,8 +225,9 @@ MapStatus WorldMap::Integrate(const std::string& sensor_id, const Eigen::Isometr
   if (sealed) {
     if (s->rendered_frames != sealed->frames) {
       RenderStats render_stats;
-      (void)ReplaceLive(sensor_id,
-                        fusion::Render(*sealed->grid, sealed->T_world_sensor, render_, &render_stats));
+      const SaturatedFree skip = Saturation(sensor_id);
+      (void)ReplaceLive(sensor_id, fusion::Render(*sealed->grid, sealed->T_world_sensor, render_,
+                                                  &render_stats, &skip));
       ++s->counters.renders;
     }
     (void)CommitLive(sensor_id);
@@ -230,8 +256,9 @@ MapStatus WorldMap::Render(const std::string& sensor_id, FuseStats* stats) {
   FuseStats result;
   if (s->periods && s->periods->open().frames > 0) {
     const Period& open = s->periods->open();
+    const SaturatedFree skip = Saturation(sensor_id);
     (void)ReplaceLive(sensor_id, fusion::Render(*open.grid, open.T_world_sensor, render_,
-                                                &result.render),
+                                                &result.render, &skip),
                       &result);
     s->rendered_frames = open.frames;
     (void)Publish();

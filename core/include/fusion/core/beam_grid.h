@@ -176,6 +176,16 @@ class BeamGrid {
   // interval's prior occupancy is returned. Boundaries are rounded to cell edges.
   void IntervalOccupancy(std::size_t beam, const std::vector<double>& boundaries_m,
                          std::vector<double>* out) const;
+  // S(c) for every cell c in [first, last] (clamped to [0, N]) of one beam into *tails, and S(0)
+  // (the beam's whole mass) into *total, in one walk of the beam: for a renderer that asks
+  // IntervalOccupancy many times about one stretch of a beam (IntervalOccupancyOfCells).
+  void TailMassSpan(std::size_t beam, std::uint32_t first, std::uint32_t last,
+                    std::vector<double>* tails, double* total) const;
+  // What IntervalOccupancy reports for the cells [a, b) from S(a), S(b) and the beam's total.
+  [[nodiscard]] double IntervalOccupancyOfCells(double tail_a, double tail_b, double total,
+                                                std::uint32_t cells) const;
+  // The cell IntervalOccupancy rounds a boundary to (NaN and negatives to 0, at most N).
+  [[nodiscard]] std::uint32_t CellOf(double range_m) const;
   // Where a ray from from_m on stops carrying information: the range (cell edge) of the first
   // cell after from_m whose tail mass S is below fraction * S(from_m), i.e. where the chance
   // that the beam's first hit still lies ahead has fallen below `fraction`. +infinity if
@@ -191,10 +201,15 @@ class BeamGrid {
   [[nodiscard]] bool Touched(std::size_t beam) const;
 
   void Reset();
+  // A grid of the same sensor and options, every beam untouched, sharing this one's read-only
+  // per-sensor tables (the forward model's), so it costs only its beams.
+  [[nodiscard]] std::unique_ptr<BeamGrid> EmptyCopy() const;
+  // Bytes of this grid's beams and of the tables it shares with its copies.
   [[nodiscard]] std::size_t MemoryBytes() const;
 
  private:
   struct Impl;
+  explicit BeamGrid(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
 

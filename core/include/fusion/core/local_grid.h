@@ -95,6 +95,8 @@ struct RenderStats {
   // single voxels.
   std::size_t coarse_nodes = 0;
   std::size_t fine_voxels = 0;
+  // Blocks left out because the map holds them free at the clamp (SaturatedFree).
+  std::size_t skipped_saturated = 0;
 };
 
 // World-frame voxel key of a point at the given resolution; identical to

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <vector>
 
 #include "fusion/core/beam_grid.h"
 #include "fusion/core/local_grid.h"
@@ -14,18 +15,33 @@
 
 namespace fusion {
 
+// What the map already holds saturated free: leaves of the committed history at or below the
+// free clamp, where no other live contribution has a node. A part of the render that would come
+// out with evidence <= 0 there is left out: under Eq. 16 (log-odds add, then the clamp) such
+// evidence cannot move a value held at the free clamp, so the fused map is the same without it
+// (exactly: the parts other sensors' live contributions cover are never left out). For a moving
+// sensor most of each frame's free space was seen, and saturated, by the frames before.
+struct SaturatedFree {
+  const octomap::OcTree* history = nullptr;
+  float clamp_min_log_odds = 0.0f;
+  std::vector<const RenderedGrid*> others;  // at most 8
+};
+
 // Same inputs and frames as RenderBeamGrid (the oracle); the result holds coarse free blocks
 // and voxels, in Morton order. Sensors whose field of view reaches 180 degrees on either axis
-// are rendered ray by ray (the pyramid needs the tangent tables).
+// are rendered ray by ray (the pyramid needs the tangent tables). `skip` (may be null): see
+// SaturatedFree.
 [[nodiscard]] RenderedGrid RenderProjective(const BeamGrid& grid,
                                             const Eigen::Isometry3d& T_world_sensor,
                                             const RenderOptions& options,
-                                            RenderStats* stats = nullptr);
+                                            RenderStats* stats = nullptr,
+                                            const SaturatedFree* skip = nullptr);
 
 // options.method's render: RenderProjective, or RenderBeamGrid as a RenderedGrid of voxels. The
 // voxel rules other than the max (the mean and the pool of a voxel's segments) need every
 // crossing of every ray, free ones included, and are always rendered ray by ray.
 [[nodiscard]] RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-                                  const RenderOptions& options, RenderStats* stats = nullptr);
+                                  const RenderOptions& options, RenderStats* stats = nullptr,
+                                  const SaturatedFree* skip = nullptr);
 
 }  // namespace fusion

@@ -40,6 +40,7 @@
 #include "fusion/core/change_log.h"
 #include "fusion/core/fusion_rules.h"
 #include "fusion/core/local_grid.h"
+#include "fusion/core/projective_render.h"
 #include "fusion/core/rendered_grid.h"
 #include "fusion/core/sensor.h"
 #include "fusion/core/sensor_periods.h"
@@ -127,6 +128,11 @@ class WorldMap {
   // re-fuses the regions the old or the new one covers.
   MapStatus ReplaceLive(const std::string& sensor_id, RenderedGrid rendered,
                         FuseStats* stats = nullptr);
+  // What a render of the sensor's open period may leave out (projective_render.h): the
+  // history's saturated free space outside the other sensors' live contributions. Valid until
+  // the next change of the map; empty (no history) under the max and De Morgan rules, where
+  // free evidence above the clamp still moves a value held at it.
+  [[nodiscard]] SaturatedFree Saturation(const std::string& sensor_id) const;
   // Folds the sensor's live contribution into the committed history; the map does not change
   // (it already holds it) unless other sensors' live contributions overlap it.
   MapStatus CommitLive(const std::string& sensor_id);
@@ -183,6 +189,8 @@ class WorldMap {
   // The tree to write, brought up to date (see Publication above).
   octomap::OcTree& Working();
   std::vector<MergeSource> Sources(const SensorState* except) const;
+  // Merges the regions pending_ got from one merge (from run_begin on) into the ordered rest.
+  void MergeRun(std::size_t run_begin);
 
   WorldMapOptions options_;
   FusionPolicy policy_;
