@@ -424,3 +424,43 @@ TEST_F(WorldMapTest, CoarseFreeNodesAnswerFreeAndSplitForANewSurface) {
 
 }  // namespace
 }  // namespace fusion
+
+namespace fusion {
+namespace {
+
+// Leaving out free space the history holds at the free clamp changes nothing (Eq. 16): a
+// moving sensor mapped with the facade (which passes WorldMap::Saturation to every render)
+// gives exactly the map rendered without it.
+TEST_F(WorldMapTest, LeavingOutSaturatedFreeSpaceGivesTheSameMap) {
+  WorldMap with(options_), without(options_);
+  ASSERT_EQ(with.AddSensor("sr", spec_), MapStatus::kOk);
+  ASSERT_EQ(without.AddSensor("sr", spec_), MapStatus::kOk);
+  SensorPeriods periods(spec_, SensorGridOptions(options_), options_.pose_tolerance_m,
+                        options_.pose_tolerance_rad);
+  std::size_t skipped = 0;
+  for (int k = 0; k < 8; ++k) {
+    Eigen::Isometry3d T = pose_;
+    T.translation() += Eigen::Vector3d(0.03 * k, 0.04 * (k % 3), 0.0);
+    const auto cloud = simulator_.Capture(T);
+    ASSERT_EQ(Add(&with, "sr", T, cloud), MapStatus::kOk);
+    FuseStats stats;
+    ASSERT_EQ(with.Render("sr", &stats), MapStatus::kOk);
+    skipped += stats.render.skipped_saturated;
+    // The same frame by hand, one period per frame, rendered without the hint.
+    std::unique_ptr<Period> sealed;
+    PeriodIntegration result;
+    ASSERT_EQ(periods.Integrate(T, cloud.xyz.data(), cloud.size(), cloud.beyond_range, true,
+                                &result, &sealed),
+              MapStatus::kOk);
+    if (sealed) ASSERT_EQ(without.CommitLive("sr"), MapStatus::kOk);
+    const Period& open = periods.open();
+    ASSERT_EQ(without.ReplaceLive("sr", Render(*open.grid, open.T_world_sensor,
+                                               MapRenderOptions(options_))),
+              MapStatus::kOk);
+    ExpectSameLeaves(without.tree(), with.tree());
+  }
+  EXPECT_GT(skipped, 100u) << "the frames after the first leave saturated space out";
+}
+
+}  // namespace
+}  // namespace fusion
