@@ -250,7 +250,9 @@ void FusionWorker::CommitSealed(Sealed sealed) {
   try {
     // The map may hold this period's render already (made while it was open).
     if (lane.live_sequence != period.sequence || lane.live_frames != period.frames) {
-      (void)map_->ReplaceLive(id, Render(*period.grid, period.T_world_sensor, render_options_));
+      const SaturatedFree skip = map_->Saturation(id);
+      (void)map_->ReplaceLive(
+          id, Render(*period.grid, period.T_world_sensor, render_options_, nullptr, &skip));
       renders_.fetch_add(1);
     }
     (void)map_->CommitLive(id);
@@ -287,7 +289,8 @@ bool FusionWorker::RenderOpen(Lane& lane) {
       return false;
     }
     try {
-      grid = Render(*open.grid, open.T_world_sensor, render_options_);
+      const SaturatedFree skip = map_->Saturation(lane.setup->id);
+      grid = Render(*open.grid, open.T_world_sensor, render_options_, nullptr, &skip);
     } catch (const std::exception& e) {
       spdlog::error("worker: render of '{}' failed: {}", lane.setup->id, e.what());
       return false;
