@@ -172,6 +172,18 @@ void DenseBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32
   }
 }
 
+void DenseBeam::TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,
+                         std::vector<double>* out, double* total) const {
+  const std::size_t n = ctx.cell_count();
+  out->resize(last - first + 1);
+  double acc = p_[n];
+  for (std::size_t i = n; i-- > last;) acc += p_[i];  // S(last)
+  (*out)[last - first] = acc;
+  for (std::size_t c = last; c-- > first;) (*out)[c - first] = acc += p_[c];
+  for (std::size_t i = first; i-- > 0;) acc += p_[i];
+  *total = acc;
+}
+
 std::uint32_t DenseBeam::TailDropCell(const BeamContext& ctx, std::uint32_t from,
                                       double fraction) const {
   const std::size_t n = ctx.cell_count();
@@ -217,8 +229,9 @@ std::size_t DenseBeam::MemoryBytes() const {
 UllBeam::UllBeam(const BeamContext& ctx) { Reset(ctx); }
 
 void UllBeam::Reset(const BeamContext& ctx) {
-  std::vector<Composite>().swap(list_);
-  std::vector<double>().swap(pool_);
+  // Keeps the vectors' memory: a recycled grid's beams fill up again much as before.
+  list_.clear();
+  pool_.clear();
   const std::size_t n = ctx.cell_count();
   const std::size_t visible = std::min(ctx.disc().first_visible_cell, n);
   // Split at the r_min boundary: blind and visible cells see different constant models.
@@ -579,6 +592,47 @@ void UllBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t
   while (j > 0) (*out)[--j] = acc;
 }
 
+void UllBeam::TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,
+                       std::vector<double>* out, double* total) const {
+  const auto n = static_cast<std::int64_t>(ctx.cell_count());
+  const auto lo = static_cast<std::int64_t>(first);
+  out->resize(last - first + 1);
+  double* o = out->data();  // o[c - lo] = S(c)
+  double acc = w_all_free_;  // S(end of the composite being walked)
+  std::int64_t c = last;     // the next cell to write, walking down
+  for (; c >= lo && c >= n; --c) o[c - lo] = acc;
+  for (std::size_t k = list_.size(); k-- > 0;) {
+    const Composite& comp = list_[k];
+    const std::int64_t begin = comp.first;
+    if (c < lo || c < begin) {  // the composite lies above the span (or below: then only sums)
+      acc += CompositeSum(ctx, comp);
+      continue;
+    }
+    const std::int64_t bottom = std::max(lo, begin);
+    if (comp.exploded == 0) {
+      // S(x) = S(end) + w (GeomSum(count) - GeomSum(x - begin)): no dependency between cells.
+      const double top = acc + comp.w_first * ctx.GeomSum(comp.count);
+      const double* geom = ctx.GeomSums();
+      for (std::int64_t x = bottom; x <= c; ++x) o[x - lo] = top - comp.w_first * geom[x - begin];
+      acc = top;
+    } else {
+      // A running sum from the composite's end down through the span, then on to its start.
+      const double* pool = pool_.data() + comp.pool_begin;
+      double part = 0.0;
+      for (std::int64_t t = comp.count; t-- > c + 1 - begin;) part += pool[t];
+      for (std::int64_t x = c; x >= bottom; --x) {
+        part += pool[x - begin];
+        o[x - lo] = acc + part;
+      }
+      for (std::int64_t t = bottom - begin; t-- > 0;) part += pool[t];
+      acc += part;
+    }
+    c = bottom - 1;
+  }
+  for (; c >= lo; --c) o[c - lo] = acc;
+  *total = acc;
+}
+
 void UllBeam::Prefetch() const {
   // The composite list and the start of the EC pool (an ROI is typically ~1 KB of doubles).
   __builtin_prefetch(list_.data());
@@ -661,6 +715,10 @@ class BeamStoreOf final : public BeamStore {
   void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
                   std::vector<double>* out) const override {
     beams_[beam].TailMasses(*ctx_, cells, out);
+  }
+  void TailSpan(std::size_t beam, std::uint32_t first, std::uint32_t last,
+                std::vector<double>* out, double* total) const override {
+    beams_[beam].TailSpan(*ctx_, first, last, out, total);
   }
   std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,
                              double fraction) const override {

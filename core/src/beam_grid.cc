@@ -349,13 +349,7 @@ void BeamGrid::TailMassSpan(std::size_t beam, std::uint32_t first, std::uint32_t
   const auto n = static_cast<std::uint32_t>(cells_per_beam());
   first = std::min(first, n);
   last = std::min(std::max(last, first), n);
-  thread_local std::vector<std::uint32_t> cells;
-  cells.resize(last - first + 2);
-  cells[0] = 0;
-  for (std::uint32_t c = first; c <= last; ++c) cells[c - first + 1] = c;
-  impl_->store->TailMasses(beam, cells, tails);
-  *total = tails->front();
-  tails->erase(tails->begin());
+  impl_->store->TailSpan(beam, first, last, tails, total);
 }
 
 double BeamGrid::InformationEndM(std::size_t beam, double from_m, double fraction) const {

@@ -71,6 +71,26 @@ void ExpectEquivalent(const SensorSpec& s, double cell_size_m, unsigned seed, in
   dense.IntervalOccupancy(0, bounds, &oa);
   ull.IntervalOccupancy(0, bounds, &ob);
   for (std::size_t j = 0; j < oa.size(); ++j) ASSERT_NEAR(oa[j], ob[j], 1e-6) << j;
+  // A span's tail masses in one walk: S(c) / S(0) is the dense tail sum, for any stretch.
+  {
+    std::vector<double> tail(pa.size() + 1, 0.0);
+    for (std::size_t i = pa.size(); i-- > 0;) tail[i] = tail[i + 1] + pa[i];
+    const auto n = static_cast<std::uint32_t>(dense.cells_per_beam());
+    const std::vector<std::pair<std::uint32_t, std::uint32_t>> spans = {
+        {0, n}, {n / 3, n / 2}, {n - 5, n}, {n / 2, n / 2}, {0, 7}};
+    for (const auto& [first, last] : spans) {
+      for (const BeamGrid* grid : {&dense, &ull}) {
+        std::vector<double> span;
+        double total = 0.0;
+        grid->TailMassSpan(0, first, last, &span, &total);
+        ASSERT_EQ(span.size(), last - first + 1);
+        for (std::uint32_t c = first; c <= last; ++c) {
+          ASSERT_NEAR(span[c - first] / total, tail[c], 1e-9)
+              << s.name << " seed " << seed << " span " << first << ".." << last << " cell " << c;
+        }
+      }
+    }
+  }
   // Where the remaining first-hit mass falls below a fraction of what it was at from_m:
   // both representations against the tail sums of the dense p(B).
   for (const double fraction : {1e-2, 0.5, 1e-6}) {

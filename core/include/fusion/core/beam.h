@@ -64,6 +64,7 @@ class BeamContext {
   [[nodiscard]] double rho() const { return 1.0 - prior_; }
   [[nodiscard]] double RhoPow(std::size_t j) const { return rho_pow_[j]; }    // j <= N
   [[nodiscard]] double GeomSum(std::size_t m) const { return geom_sum_[m]; }  // sum_{j<m} rho^j
+  [[nodiscard]] const double* GeomSums() const { return geom_sum_.data(); }   // GeomSum(0..N)
 
   // ROI of an outcome, clamped to the visible cells, with the relative factors
   // p(o | B_i) / OutsideRoiProbability(o) (nullptr when not tabulated: use Factor()).
@@ -106,6 +107,9 @@ class DenseBeam {
   // S(c) = mass of cells >= c plus B_{N+1}, for ascending c in [0, N].
   void TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
                   std::vector<double>* out) const;
+  // S(c) for every c in [first, last] (last <= N) into out[c - first], and S(0) into *total.
+  void TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,
+                std::vector<double>* out, double* total) const;
   // The smallest cell c in (from, N] with S(c) < fraction * S(from); N + 1 if there is none.
   [[nodiscard]] std::uint32_t TailDropCell(const BeamContext& ctx, std::uint32_t from,
                                            double fraction) const;
@@ -145,6 +149,9 @@ class UllBeam {
   void Weights(const BeamContext& ctx, std::vector<double>* weights) const;  // N + 1, unnormalised
   void TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
                   std::vector<double>* out) const;
+  // As DenseBeam::TailSpan: one walk of the list, a running sum through the span.
+  void TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,
+                std::vector<double>* out, double* total) const;
   // As DenseBeam::TailDropCell; walks the list from the far end and stops at the crossing.
   [[nodiscard]] std::uint32_t TailDropCell(const BeamContext& ctx, std::uint32_t from,
                                            double fraction) const;
@@ -206,6 +213,8 @@ class BeamStore {
   virtual void Weights(std::size_t beam, std::vector<double>* weights) const = 0;
   virtual void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
                           std::vector<double>* out) const = 0;
+  virtual void TailSpan(std::size_t beam, std::uint32_t first, std::uint32_t last,
+                        std::vector<double>* out, double* total) const = 0;
   [[nodiscard]] virtual std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,
                                                    double fraction) const = 0;
   [[nodiscard]] virtual BeamProfileCells Profile(std::size_t beam, std::uint32_t from,
