@@ -194,9 +194,13 @@ double BeamTracer::InformationEnd(std::size_t beam, double from_m) {
   const std::uint32_t from = grid_.CellOf(from_m);
   if (table_.Covers(beam, from, from)) {
     // BeamGrid::InformationEndM: the smallest cell after `from` whose S is below the fraction.
+    // S does not rise with c: bisect.
     const double threshold = options_.tail_mass * table_.S(from);
-    for (std::uint32_t c = from + 1; c <= table_.last; ++c) {
-      if (table_.S(c) < threshold) return static_cast<double>(c) * cell_m_;
+    const auto begin = table_.tails.begin() + (from + 1 - table_.first);
+    const auto at = std::partition_point(begin, table_.tails.end(),
+                                         [threshold](double s) { return s >= threshold; });
+    if (at != table_.tails.end()) {
+      return static_cast<double>(table_.first + (at - table_.tails.begin())) * cell_m_;
     }
   }
   return grid_.InformationEndM(beam, from_m, options_.tail_mass);

@@ -1,22 +1,39 @@
-// Speed of issue 4: rendering beam grids into local grids, fusing them into the
-// world map, and the stationary / moving workflows against OctoMap on the same
-// simulated clouds.
+// Speed of rendering beam grids into the map (issues 4 and 10): the projective render against
+// its oracle (the ray-traced render), render + fuse, and the stationary and moving workflows
+// against OctoMap's insertPointCloud on the same simulated clouds, as ratios measured in the
+// same run.
 //
 //   bench_map --benchmark_min_time=0.2
+//   bench_map --benchmark_filter=Versus      # only the side-by-side runs against OctoMap
 #include <benchmark/benchmark.h>
 
+#include <chrono>
+#include <cmath>
 #include <vector>
 
 #include "fusion/core/local_grid.h"
 #include "fusion/core/planes.h"
+#include "fusion/core/projective_render.h"
 #include "fusion/core/world_map.h"
 #include "fusion/sim/experiment.h"
 #include "fusion/sim/scene.h"
+#include "fusion/sim/simulator.h"
 
 namespace {
 
 constexpr double kResolutionM = 0.02;
 constexpr int kStationaryFrames = 30;
+// The moving drive: 30 Hz, 0.17 m/s sideways and 4 deg/s of yaw (issue 10's waypoints).
+constexpr double kFrameRateHz = 30.0;
+constexpr double kSpeedMps = 0.17;
+constexpr double kYawRateDegps = 4.0;
+constexpr int kMovingFrames = 12;
+
+using Clock = std::chrono::steady_clock;
+
+double MillisecondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
 
 struct Fixture {
   fusion::sim::Scene scene = fusion::sim::PaperBoardScene();
@@ -33,18 +50,41 @@ const Fixture& SharedFixture() {
   return fixture;
 }
 
-fusion::WorldMapOptions MapOptions() {
+// A sensor of `run` driving from its pose: frame k at k / 30 s.
+struct Drive {
+  std::vector<Eigen::Isometry3d> poses;
+  std::vector<fusion::sim::OrganizedCloud> clouds;
+};
+
+Drive MakeDrive(const fusion::sim::SensorRun& run, int frames) {
+  fusion::sim::RangeSimulator simulator(fusion::sim::PaperBoardScene(), run.spec, run.sim);
+  Drive d;
+  for (int k = 0; k < frames; ++k) {
+    const double t_s = k / kFrameRateHz;
+    Eigen::Isometry3d T = run.T_world_sensor;
+    T.translation().y() += kSpeedMps * t_s;
+    T.linear() = Eigen::AngleAxisd(kYawRateDegps * t_s * M_PI / 180.0, Eigen::Vector3d::UnitZ())
+                     .toRotationMatrix() *
+                 T.linear();
+    d.poses.push_back(T);
+    d.clouds.push_back(simulator.Capture(T));
+  }
+  return d;
+}
+
+const Drive& SrDrive() {
+  static const Drive drive = MakeDrive(SharedFixture().sr, kMovingFrames);
+  return drive;
+}
+
+fusion::WorldMapOptions MapOptions(double max_range_m = 1e9) {
   fusion::WorldMapOptions options;
   options.resolution_m = kResolutionM;
+  options.render.max_range_m = max_range_m;
   return options;
 }
 
-fusion::BeamGridOptions GridOptions() {
-  // The beam grid WorldMap would give the sensor (its prior included).
-  fusion::BeamGridOptions options = MapOptions().beam_grid;
-  options.prior_reference_length_m = MapOptions().beam_prior_length_m;
-  return options;
-}
+fusion::BeamGridOptions GridOptions() { return fusion::SensorGridOptions(MapOptions()); }
 
 void BM_IntegrateSr3000Frame(benchmark::State& state) {
   const Fixture& f = SharedFixture();
@@ -57,51 +97,61 @@ void BM_IntegrateSr3000Frame(benchmark::State& state) {
 }
 BENCHMARK(BM_IntegrateSr3000Frame)->Unit(benchmark::kMillisecond);
 
-// Renders a beam grid of the first `frames` SR-3000 frames with `options`, timed, and reports
-// the render's counts.
-void RenderSr3000Frames(benchmark::State& state, std::size_t frames,
-                        const fusion::RenderOptions& options) {
-  const Fixture& f = SharedFixture();
-  fusion::BeamGrid grid(f.sr.spec, GridOptions());
-  for (std::size_t i = 0; i < frames; ++i) {
-    const auto& cloud = f.frames[i % f.frames.size()];
-    grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
-  }
+// Renders (fusion::Render) a beam grid of `clouds` seen from T, timed, with the render's counts.
+void RenderFrames(benchmark::State& state, const fusion::SensorSpec& spec,
+                  const std::vector<fusion::sim::OrganizedCloud>& clouds,
+                  const Eigen::Isometry3d& T, const fusion::RenderOptions& options) {
+  fusion::BeamGrid grid(spec, GridOptions());
+  for (const auto& cloud : clouds) grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
   fusion::RenderStats stats;
   for (auto _ : state) {
-    auto local = fusion::RenderBeamGrid(grid, f.sr.T_world_sensor, options, &stats);
-    benchmark::DoNotOptimize(local.size());
+    stats = {};
+    benchmark::DoNotOptimize(fusion::Render(grid, T, options, &stats).size());
   }
-  state.counters["voxels"] = static_cast<double>(stats.voxels);
+  state.counters["coarse_nodes"] = static_cast<double>(stats.coarse_nodes);
+  state.counters["fine_voxels"] = static_cast<double>(stats.fine_voxels);
+  state.counters["traced_voxels"] = static_cast<double>(stats.voxels);
   state.counters["segments"] = static_cast<double>(stats.segments);
-  state.counters["rays"] = static_cast<double>(stats.rays_traced);
 }
 
-// Rendering a 30-frame SR-3000 beam grid into a 2 cm local grid, on 1 or 2 threads.
+fusion::RenderOptions Options(double resolution_m, fusion::RenderMethod method) {
+  fusion::RenderOptions options;
+  options.resolution_m = resolution_m;
+  options.method = method;
+  return options;
+}
+
+// A 30-frame SR-3000 grid at 2 cm: the projective render (arg 0) and its oracle (arg 1).
 void BM_RenderSr3000(benchmark::State& state) {
-  fusion::RenderOptions options;
-  options.resolution_m = kResolutionM;
-  options.threads = static_cast<unsigned>(state.range(0));
-  RenderSr3000Frames(state, kStationaryFrames, options);
+  const Fixture& f = SharedFixture();
+  const auto method =
+      state.range(0) == 0 ? fusion::RenderMethod::kProjective : fusion::RenderMethod::kRayTraced;
+  state.SetLabel(state.range(0) == 0 ? "projective" : "ray-traced (oracle)");
+  RenderFrames(state, f.sr.spec, f.frames, f.sr.T_world_sensor, Options(kResolutionM, method));
 }
-BENCHMARK(BM_RenderSr3000)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderSr3000)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
-// The same at fusiond's default map settings (5 cm voxels, rays to 9 m), one thread, for a
-// grid of 1 frame (the first render of a period) and of 30.
-void BM_RenderSr3000ServiceDefaults(benchmark::State& state) {
-  fusion::RenderOptions options;
-  options.resolution_m = 0.05;
-  options.max_range_m = 9.0;
-  RenderSr3000Frames(state, static_cast<std::size_t>(state.range(0)), options);
+// One SR-3000 frame at 5 cm, rays to the sensor's full range (target <= 10 ms).
+void BM_RenderSr3000OneFrame5cm(benchmark::State& state) {
+  const Fixture& f = SharedFixture();
+  RenderFrames(state, f.sr.spec, {f.frames[0]}, f.sr.T_world_sensor,
+               Options(0.05, fusion::RenderMethod::kProjective));
 }
-BENCHMARK(BM_RenderSr3000ServiceDefaults)
-    ->Arg(1)
-    ->Arg(kStationaryFrames)
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
+BENCHMARK(BM_RenderSr3000OneFrame5cm)->Unit(benchmark::kMillisecond);
 
-// Rendering and fusing a 30-frame SR-3000 period into a 2 cm world map
-// (re-render of the same period: replaces the sensor's live contribution).
+// One stereo frame at its full 640 x 480 pixels as beams, 2 cm (target <= 33 ms).
+void BM_RenderStocFullResolution(benchmark::State& state) {
+  fusion::sim::PaperRunOptions run_options;
+  run_options.stereo_cols = 640;
+  run_options.stereo_rows = 480;
+  const fusion::sim::SensorRun stoc = fusion::sim::PaperSensorRuns(run_options)[1];
+  fusion::sim::RangeSimulator simulator(fusion::sim::PaperBoardScene(), stoc.spec, stoc.sim);
+  RenderFrames(state, stoc.spec, {simulator.Capture(stoc.T_world_sensor)}, stoc.T_world_sensor,
+               Options(kResolutionM, fusion::RenderMethod::kProjective));
+}
+BENCHMARK(BM_RenderStocFullResolution)->Unit(benchmark::kMillisecond);
+
+// Re-render of the same 30-frame period into the 2 cm world map (replaces the live part).
 void BM_RenderAndFuseSr3000(benchmark::State& state) {
   const Fixture& f = SharedFixture();
   fusion::WorldMap map(MapOptions());
@@ -110,41 +160,18 @@ void BM_RenderAndFuseSr3000(benchmark::State& state) {
     (void)map.Integrate("sr", f.sr.T_world_sensor, cloud.xyz.data(), cloud.size(),
                         cloud.beyond_range);
   }
-  fusion::FuseStats stats;
-  for (auto _ : state) {
-    benchmark::DoNotOptimize(map.Render("sr", &stats));
-  }
+  for (auto _ : state) benchmark::DoNotOptimize(map.Render("sr"));
   state.counters["map_leaves"] = static_cast<double>(map.tree().getNumLeafNodes());
-  state.counters["rays"] = static_cast<double>(stats.render.rays_traced);
-  state.counters["segments"] = static_cast<double>(stats.render.segments);
 }
 BENCHMARK(BM_RenderAndFuseSr3000)->Unit(benchmark::kMillisecond);
 
-// Fusing into an empty map (first render of a period: every voxel is new to the
-// octree).
-void BM_RenderAndFuseSr3000IntoEmptyMap(benchmark::State& state) {
+// Stationary workflow, ours and OctoMap's in the same run: 30 SR-3000 frames integrated and one
+// render + fuse, against the same 30 frames inserted into OctoMap at 2 cm.
+void BM_StationaryVersusOctoMap(benchmark::State& state) {
   const Fixture& f = SharedFixture();
+  double ours_ms = 0.0, octomap_ms = 0.0;
   for (auto _ : state) {
-    state.PauseTiming();
-    auto map = std::make_unique<fusion::WorldMap>(MapOptions());
-    (void)map->AddSensor("sr", f.sr.spec);
-    for (const auto& cloud : f.frames) {
-      (void)map->Integrate("sr", f.sr.T_world_sensor, cloud.xyz.data(), cloud.size(),
-                           cloud.beyond_range);
-    }
-    state.ResumeTiming();
-    benchmark::DoNotOptimize(map->Render("sr"));
-    state.PauseTiming();
-    map.reset();
-    state.ResumeTiming();
-  }
-}
-BENCHMARK(BM_RenderAndFuseSr3000IntoEmptyMap)->Unit(benchmark::kMillisecond);
-
-// Stationary workflow: 30 SR-3000 frames integrated, then one render + fuse.
-void BM_StationaryOurs(benchmark::State& state) {
-  const Fixture& f = SharedFixture();
-  for (auto _ : state) {
+    auto t0 = Clock::now();
     fusion::WorldMap map(MapOptions());
     (void)map.AddSensor("sr", f.sr.spec);
     for (const auto& cloud : f.frames) {
@@ -152,61 +179,57 @@ void BM_StationaryOurs(benchmark::State& state) {
                           cloud.beyond_range);
     }
     (void)map.Render("sr");
-    benchmark::DoNotOptimize(map.version());
-  }
-}
-BENCHMARK(BM_StationaryOurs)->Unit(benchmark::kMillisecond);
-
-// The same 30 frames inserted into OctoMap at 2 cm (insertPointCloud, default
-// sensor model).
-void BM_StationaryOctoMap(benchmark::State& state) {
-  const Fixture& f = SharedFixture();
-  for (auto _ : state) {
+    ours_ms = MillisecondsSince(t0);
+    t0 = Clock::now();
     octomap::OcTree tree(kResolutionM);
     for (const auto& cloud : f.frames) {
       fusion::sim::InsertIntoOctoMap(cloud, f.sr.T_world_sensor, f.sr.spec.r_max_m, &tree);
     }
-    benchmark::DoNotOptimize(tree.size());
+    octomap_ms = MillisecondsSince(t0);
   }
+  state.counters["ours_ms"] = ours_ms;
+  state.counters["octomap_ms"] = octomap_ms;
+  state.counters["speedup"] = octomap_ms / ours_ms;
 }
-BENCHMARK(BM_StationaryOctoMap)->Unit(benchmark::kMillisecond)->Iterations(1);
+BENCHMARK(BM_StationaryVersusOctoMap)->Unit(benchmark::kMillisecond)->Iterations(1);
 
-// Moving sensor, per frame: every frame has a new pose, so each frame is
-// integrated into a fresh beam grid, rendered and fused (commit of the previous
-// period included).
-void BM_MovingPerFrameOurs(benchmark::State& state) {
+// Moving, per frame, ours and OctoMap's in the same run: the SR-3000 drives (a new pose every
+// frame), each frame integrated, rendered and fused (committing the frame before), against one
+// insertPointCloud per frame; rays to the sensor's range (arg 0) or to 4 m (arg 1, the
+// deployment's map.max_range_m), for both. Also the memory of the two maps after the drive.
+void BM_MovingVersusOctoMap(benchmark::State& state) {
   const Fixture& f = SharedFixture();
-  fusion::WorldMap map(MapOptions());
-  (void)map.AddSensor("sr", f.sr.spec);
-  std::size_t i = 0;
-  fusion::FuseStats stats;
+  const Drive& drive = SrDrive();
+  const double max_range_m = state.range(0) == 0 ? f.sr.spec.r_max_m : 4.0;
+  state.SetLabel(state.range(0) == 0 ? "full range" : "rays to 4 m");
+  double ours_ms = 0.0, octomap_ms = 0.0;
+  std::size_t ours_bytes = 0, octomap_bytes = 0;
   for (auto _ : state) {
-    const auto& cloud = f.frames[i % f.frames.size()];
-    Eigen::Isometry3d T = f.sr.T_world_sensor;
-    T.translation().y() += 0.05 * static_cast<double>(i % 2);  // beyond the 1 cm tolerance
-    ++i;
-    (void)map.Integrate("sr", T, cloud.xyz.data(), cloud.size(), cloud.beyond_range);
-    (void)map.Render("sr", &stats);
+    fusion::WorldMap map(MapOptions(max_range_m));
+    (void)map.AddSensor("sr", f.sr.spec);
+    octomap::OcTree tree(kResolutionM);
+    ours_ms = octomap_ms = 0.0;
+    for (std::size_t k = 0; k < drive.poses.size(); ++k) {
+      const auto& cloud = drive.clouds[k];
+      auto t0 = Clock::now();
+      (void)map.Integrate("sr", drive.poses[k], cloud.xyz.data(), cloud.size(), cloud.beyond_range);
+      (void)map.Render("sr");
+      if (k > 0) ours_ms += MillisecondsSince(t0);  // the first frame builds the beam grids
+      t0 = Clock::now();
+      fusion::sim::InsertIntoOctoMap(cloud, drive.poses[k], max_range_m, &tree);
+      if (k > 0) octomap_ms += MillisecondsSince(t0);
+    }
+    ours_bytes = map.tree().memoryUsage();
+    octomap_bytes = tree.memoryUsage();
   }
-  state.counters["rays"] = static_cast<double>(stats.render.rays_traced);
-  state.counters["segments"] = static_cast<double>(stats.render.segments);
-  state.counters["voxels"] = static_cast<double>(stats.render.voxels);
+  const double frames = static_cast<double>(drive.poses.size() - 1);
+  state.counters["ours_ms_per_frame"] = ours_ms / frames;
+  state.counters["octomap_ms_per_frame"] = octomap_ms / frames;
+  state.counters["speedup"] = octomap_ms / ours_ms;
+  state.counters["ours_map_MB"] = static_cast<double>(ours_bytes) / 1e6;
+  state.counters["octomap_MB"] = static_cast<double>(octomap_bytes) / 1e6;
 }
-BENCHMARK(BM_MovingPerFrameOurs)->Unit(benchmark::kMillisecond);
-
-void BM_MovingPerFrameOctoMap(benchmark::State& state) {
-  const Fixture& f = SharedFixture();
-  octomap::OcTree tree(kResolutionM);
-  std::size_t i = 0;
-  for (auto _ : state) {
-    const auto& cloud = f.frames[i % f.frames.size()];
-    Eigen::Isometry3d T = f.sr.T_world_sensor;
-    T.translation().y() += 0.05 * static_cast<double>(i % 2);
-    ++i;
-    fusion::sim::InsertIntoOctoMap(cloud, T, f.sr.spec.r_max_m, &tree);
-  }
-}
-BENCHMARK(BM_MovingPerFrameOctoMap)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MovingVersusOctoMap)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->Iterations(1);
 
 // Hough planes on the stationary map.
 void BM_HoughPlanes(benchmark::State& state) {
