@@ -179,14 +179,16 @@ int Sensors(Context& ctx, const Args&) {
   fusion::v1::ListSensorsResponse reply;
   const auto status = ctx.stub->ListSensors(&context, fusion::v1::ListSensorsRequest(), &reply);
   if (!status.ok()) return Failed(ctx, status);
-  std::printf("%-12s %-8s %9s %13s %10s %10s %9s %9s %10s\n", "sensor", "preset", "beams",
-              "memory_bytes", "received", "integrated", "dropped", "rejected", "last_seq");
+  std::printf("%-12s %-8s %9s %13s %10s %10s %9s %9s %9s %10s\n", "sensor", "preset", "beams",
+              "memory_bytes", "received", "integrated", "merged", "dropped", "rejected",
+              "last_seq");
   for (const auto& s : reply.sensors()) {
     const auto& c = s.counters();
-    std::printf("%-12s %-8s %9u %13llu %10llu %10llu %9llu %9llu %10llu\n", s.id().c_str(),
+    std::printf("%-12s %-8s %9u %13llu %10llu %10llu %9llu %9llu %9llu %10llu\n", s.id().c_str(),
                 s.preset().empty() ? "-" : s.preset().c_str(), s.beams(), (unsigned long long)s.memory_bytes(),
                 (unsigned long long)c.received(), (unsigned long long)c.integrated(),
-                (unsigned long long)c.dropped(), (unsigned long long)c.rejected(),
+                (unsigned long long)c.merged(), (unsigned long long)c.dropped(),
+                (unsigned long long)c.rejected(),
                 (unsigned long long)c.last_sequence_number());
     for (const auto& [reason, count] : c.rejected_by_reason()) {
       std::printf("  rejected %-16s %llu\n", reason.c_str(), (unsigned long long)count);

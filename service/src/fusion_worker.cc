@@ -129,7 +129,9 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   {
     std::unique_lock<std::mutex> lock(work_mutex_);
     if (options_.wait_for_renderer) {
-      room_cv_.wait(lock, [&] { return lane->sealed_waiting < kMaxSealedPeriods || stop_; });
+      // Also while stopping: the renderer runs until the integrator is done, and what is still
+      // queued is mapped as taken, not merged.
+      room_cv_.wait(lock, [&] { return lane->sealed_waiting < kMaxSealedPeriods; });
     }
     may_seal = lane->sealed_waiting < kMaxSealedPeriods;
   }

@@ -533,6 +533,7 @@ grpc::ServerUnaryReactor* MapService::ListSensors(grpc::CallbackServerContext* c
       out->set_rejected(c->rejected.Total());
       out->set_dropped(c->dropped);
       out->set_integrated(c->integrated);
+      out->set_merged(c->merged);
       out->set_points_updated(c->points_updated);
       out->set_points_beyond_range(c->points_beyond_range);
       out->set_points_missing(c->points_missing);

@@ -9,9 +9,13 @@
 //   3. OctoMap: octomap::OcTree::insertPointCloud of the same points (world frame, sensor
 //      origin, max range = the Kinect's r_max).
 // The import is timed separately. Prints a markdown table.
-// Usage: tum_map_bench [--data DIR] [--resolution M] [--log-level LEVEL] [--timeout S]
+// Usage: tum_map_bench [--data DIR] [--resolution M] [--beams COLSxROWS] [--log-level LEVEL]
+//                      [--timeout S]
 //   --data: the TUM folder (default <repo>/../shared/data/tum_fr2_pioneer_slam2); absent: exit 0
-//   --resolution: map voxel edge in metres (default 0.02); --log-level: fusiond's (default warn;
+//   --resolution: map voxel edge in metres (default 0.02); --beams: the Kinect's beam grid
+//   (default 640x480, one beam per pixel; 160x120 gives each beam a 4 x 4 block of pixels, every
+//   pixel still a reading of its beam, as the deployment does for the stereo camera);
+//   --log-level: fusiond's (default warn;
 //   other levels write its whole log to /tmp/tum_map_bench_fusiond.log); --timeout: seconds to
 //   wait for the service's map (default 900).
 #include <google/protobuf/descriptor.h>
@@ -92,6 +96,7 @@ double ProcessCpuSeconds(pid_t pid) {
 struct Options {
   std::string data_dir;
   double resolution_m = 0.02;
+  int cols = 640, rows = 480;
   std::string log_level = "warn";
   double timeout_s = 900.0;
 };
@@ -119,6 +124,12 @@ bool ParseArgs(int argc, char** argv, Options* options) {
       options->data_dir = value;
     } else if (flag == "--resolution") {
       options->resolution_m = std::atof(value.c_str());
+    } else if (flag == "--beams") {
+      if (std::sscanf(value.c_str(), "%dx%d", &options->cols, &options->rows) != 2 ||
+          options->cols < 1 || options->rows < 1 || options->cols > 640 || options->rows > 480) {
+        std::fprintf(stderr, "--beams wants COLSxROWS within 640x480, e.g. 160x120\n");
+        return false;
+      }
     } else if (flag == "--log-level") {
       options->log_level = value;
     } else if (flag == "--timeout") {
@@ -150,9 +161,10 @@ std::string LoadAverage() {
 
 // ---- configuration (the same file for fusiond and the in-process map) ----------------------
 
-// The Kinect of e2e_tum_test.cc with one beam per pixel: the FOV covers every pixel (principal
+// The Kinect of e2e_tum_test.cc with cols x rows beams: the FOV covers every pixel (principal
 // point off centre), sigma(r) = 0.0012 + 0.0019 (r - 0.4)^2 m.
-std::string ConfigText(double resolution_m) {
+std::string ConfigText(const Options& options) {
+  const double resolution_m = options.resolution_m;
   const double fov_h_deg = 2.0 * std::atan(325.1 / 520.9) * 180.0 / kPi + 0.5;
   const double fov_v_deg = 2.0 * std::atan(249.7 / 521.0) * 180.0 / kPi + 0.5;
   const double s2 = 0.0019, s1 = -2.0 * 0.0019 * 0.4, s0 = 0.0012 + 0.0019 * 0.16;
@@ -160,7 +172,7 @@ std::string ConfigText(double resolution_m) {
   config << "sensors { id: \"" << kSensorId << "\" model: \"paper3d\" r_min_m: 0.5 r_max_m: "
          << kKinectRMaxM << "\n"
          << "  fov_h_deg: " << fov_h_deg << " fov_v_deg: " << fov_v_deg << "\n"
-         << "  cols: 640 rows: 480 epsilon: 0.02\n"
+         << "  cols: " << options.cols << " rows: " << options.rows << " epsilon: 0.02\n"
          << "  q_mu { a2: 0 a1: 1 a0: 0 }\n"
          << "  q_sigma { a2: " << s2 << " a1: " << s1 << " a0: " << s0 << " }\n"
          << "  queue_depth: 20 }\n"
@@ -681,9 +693,9 @@ int RunAll(const Options& options, const std::string& dir) {
   PrintFrames(frames, recording);
   if (frames.empty()) return 1;
   const std::string config_path = dir + "/fusiond.pbtxt";
-  std::ofstream(config_path) << ConfigText(options.resolution_m);
+  std::ofstream(config_path) << ConfigText(options);
   std::printf("configuration (fusiond and in process):\n\n```\n%s```\n\n",
-              ConfigText(options.resolution_m).c_str());
+              ConfigText(options).c_str());
   const auto setup = CoreSetupFromFile(config_path);
   if (!setup) return 1;
 
@@ -698,8 +710,8 @@ int RunAll(const Options& options, const std::string& dir) {
   if (service) rows.push_back(*service);
   if (core) rows.push_back(*core);
   rows.push_back(octomap);
-  std::printf("\n## Results at %.3f m (import, not compared: %.2f s)\n", options.resolution_m,
-              import->elapsed_s);
+  std::printf("\n## Results at %.3f m, %d x %d beams (import, not compared: %.2f s)\n",
+              options.resolution_m, options.cols, options.rows, import->elapsed_s);
   PrintTable(rows, octomap);
   if (!service) std::printf("\n(the service row is missing: see section 1)\n");
   return service && core ? 0 : 1;
