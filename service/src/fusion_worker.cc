@@ -74,6 +74,10 @@ bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> history, std::string* 
   }
   if (history) map_->LoadHistory(*history);
   PublishLocked();
+  // spdlog's registry is a function-local static of an uninstrumented library: create it here,
+  // before the threads that log, so its construction happens before their first use (what the
+  // thread sanitizer can see; fusiond's main has logged long before, a test may not have).
+  (void)spdlog::default_logger_raw();
   integrator_ = std::thread([this] { IntegratorLoop(); });
   renderer_ = std::thread([this] { RendererLoop(); });
   return true;

@@ -422,9 +422,21 @@ struct BenchOptions {
   [[nodiscard]] bool Runs(char scenario) const { return only.find(scenario) != std::string::npos; }
 };
 
+constexpr const char* kUsage =
+    "usage: service_bench [--seconds S] [--trials N] [--log-level LEVEL] [--max-range M]\n"
+    "                     [--config TEXT] [--only LIST]\n"
+    "  --seconds   scenarios 3 and 4 (default 10) and 5 (default 20)\n"
+    "  --trials    scenario 1's frames (default 20)\n"
+    "  --log-level fusiond's (default warn; other levels write its log to /tmp)\n"
+    "  --max-range map.max_range_m of every scenario\n"
+    "  --config    more fusiond configuration (text format), merged over each scenario's\n"
+    "  --only      scenarios to run, e.g. 1,3 (default 1,2,3,4,5; 2 and 3 need 1)\n"
+    "Scenarios: 1 latency of one frame, 2 QueryPoints throughput, 3 small queries while\n"
+    "streaming, 4 drops at 30 + 15 Hz, 5 the deployment's configuration while moving.\n";
+
 bool ParseOptions(int argc, char** argv, BenchOptions* options) {
   if (argc % 2 == 0) {
-    std::fprintf(stderr, "usage: see the comment at the top of service_bench.cc\n");
+    std::fprintf(stderr, "%s", kUsage);
     return false;
   }
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -1355,6 +1367,10 @@ int RunMovingScenario(const BenchOptions& options, const std::string& dir, unsig
 
 int main(int argc, char** argv) {
   BenchOptions options;
+  if (argc == 2 && std::string(argv[1]) == "--help") {
+    std::printf("%s", kUsage);
+    return 0;
+  }
   if (!ParseOptions(argc, argv, &options)) return 2;
   const auto bench_start = Clock::now();
   std::printf(

@@ -110,13 +110,21 @@ std::string DefaultDataDir() {
   return (root / ".." / "shared" / "data" / "tum_fr2_pioneer_slam2").lexically_normal().string();
 }
 
+constexpr const char* kUsage =
+    "usage: tum_map_bench [--data DIR] [--resolution M] [--beams COLSxROWS] [--log-level LEVEL]\n"
+    "                     [--timeout S]\n"
+    "  --data        the TUM folder (default ../shared/data/tum_fr2_pioneer_slam2)\n"
+    "  --resolution  map voxel edge, metres (default 0.02)\n"
+    "  --beams       the Kinect's beam grid (default 640x480: one beam per pixel)\n"
+    "  --log-level   fusiond's (default warn)\n"
+    "  --timeout     seconds to wait for the service's map (default 900)\n";
+
 bool ParseArgs(int argc, char** argv, Options* options) {
   options->data_dir = DefaultDataDir();
   for (int i = 1; i < argc; i += 2) {
     const std::string flag = argv[i];
     if (i + 1 >= argc) {
-      std::fprintf(stderr, "%s needs a value (see the comment at the top of tum_map_bench.cc)\n",
-                   flag.c_str());
+      std::fprintf(stderr, "%s needs a value\n%s", flag.c_str(), kUsage);
       return false;
     }
     const std::string value = argv[i + 1];
@@ -721,6 +729,10 @@ int RunAll(const Options& options, const std::string& dir) {
 
 int main(int argc, char** argv) {
   Options options;
+  if (argc == 2 && std::string(argv[1]) == "--help") {
+    std::printf("%s", kUsage);
+    return 0;
+  }
   if (!ParseArgs(argc, argv, &options)) return 2;
   std::printf("# TUM fr2/pioneer_slam2, every pixel: fusiond vs. WorldMap vs. OctoMap\n\n"
               "command: %s\n\nload average at start: %s; hardware threads: %u\n\n",
