@@ -22,6 +22,10 @@ double Logit(double p) {
   return std::log(p / (1.0 - p));
 }
 
+// Voxel index (world / resolution, floored) inside OctoMap's key range: keys are uint16 around
+// tree_max_val, so an index outside [-32768, 32767] would wrap to the far side of the map.
+bool InKeyRange(long index) { return index >= -kTreeMaxVal && index < kTreeMaxVal; }
+
 // Offset of sub-ray i of k across a beam, in beam widths (-0.5, 0.5).
 double SubOffset(int i, int k) { return (i + 0.5) / k - 0.5; }
 
@@ -118,6 +122,8 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
       t_delta[a] = std::numeric_limits<double>::infinity();
     }
   }
+  // A ray that starts outside the map's key range writes nothing (it never wraps around).
+  if (!InKeyRange(index[0]) || !InKeyRange(index[1]) || !InKeyRange(index[2])) return t_first;
   double t_in = std::min(t_entry, t_first);
   // The mass the ray has left behind it since t_ref, as a trace from t_ref would have counted it.
   double remaining_mass = 1.0;
@@ -128,11 +134,12 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
     if (remaining_mass < options_.tail_mass) return t_in;
   }
   bool done = false;
+  bool left_map = false;  // the ray left the key range: it ends at the map's edge
   while (!done) {
     boundaries_.clear();
     keys_.clear();
     boundaries_.push_back(t_in);
-    while (keys_.size() < kChunkSegments && t_in < t_last_entry) {
+    while (keys_.size() < kChunkSegments && t_in < t_last_entry && !left_map) {
       const int axis =
           (t_max[0] < t_max[1]) ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
       const double t_out = std::min(t_max[axis], t_end_);
@@ -143,6 +150,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
       t_in = t_out;
       index[axis] += step[axis];
       t_max[axis] += t_delta[axis];
+      left_map = !InKeyRange(index[axis]);
     }
     if (keys_.empty()) break;
     if (shift != 0.0) {
@@ -167,7 +175,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
         break;
       }
     }
-    if (t_in >= t_last_entry) done = true;
+    if (t_in >= t_last_entry || left_map) done = true;
   }
   return t_in;
 }

@@ -54,6 +54,18 @@ class Probe {
 
 }  // namespace
 
+double MapHalfExtentM(double resolution_m) { return kTreeMaxVal * resolution_m; }
+
+bool InsideMap(const Eigen::Vector3d& p_world, double resolution_m) {
+  // The voxel index, as KeyOfPoint computes it, within [-32768, 32767].
+  const double inv = 1.0 / resolution_m;
+  for (int a = 0; a < 3; ++a) {
+    const double index = std::floor(inv * p_world[a]);
+    if (!(index >= -kTreeMaxVal && index < kTreeMaxVal)) return false;  // NaN too
+  }
+  return true;
+}
+
 octomap::OcTreeKey KeyOfPoint(const Eigen::Vector3d& p_world, double resolution_m) {
   const double inv = 1.0 / resolution_m;
   return octomap::OcTreeKey(

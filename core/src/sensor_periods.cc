@@ -1,6 +1,10 @@
 #include "fusion/core/sensor_periods.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
+
+#include "fusion/core/local_grid.h"
 
 namespace fusion {
 
@@ -16,6 +20,8 @@ const char* MapStatusName(MapStatus status) {
       return "invalid pose";
     case MapStatus::kInvalidArgument:
       return "invalid argument";
+    case MapStatus::kOutsideMap:
+      return "outside the map";
   }
   return "unknown status";
 }
@@ -28,11 +34,13 @@ bool ValidPose(const Eigen::Isometry3d& T) {
 }
 
 SensorPeriods::SensorPeriods(const SensorSpec& spec, const BeamGridOptions& grid_options,
-                             double pose_tolerance_m, double pose_tolerance_rad)
+                             double pose_tolerance_m, double pose_tolerance_rad,
+                             double map_resolution_m)
     : spec_(spec),
       grid_options_(grid_options),
       pose_tolerance_m_(pose_tolerance_m),
-      pose_tolerance_rad_(pose_tolerance_rad) {
+      pose_tolerance_rad_(pose_tolerance_rad),
+      map_resolution_m_(map_resolution_m) {
   open_ = NewPeriod();
 }
 
@@ -58,6 +66,36 @@ bool SensorPeriods::Moved(const Eigen::Isometry3d& T_world_sensor) const {
   return translation_m > pose_tolerance_m_ || std::abs(delta.angle()) > pose_tolerance_rad_;
 }
 
+const float* SensorPeriods::InsideMapOnly(const Eigen::Isometry3d& T_world_frame,
+                                          const float* points, std::size_t point_count,
+                                          const std::vector<std::uint8_t>& beyond_range,
+                                          std::size_t* outside) {
+  *outside = 0;
+  if (!(map_resolution_m_ > 0.0)) return points;
+  // No point can be outside if the farthest one, from anywhere near the origin, is not.
+  double farthest = 0.0;
+  for (std::size_t k = 0; k < 3 * point_count; ++k) {
+    if (std::isfinite(points[k])) farthest = std::max(farthest, std::abs(double{points[k]}));
+  }
+  const double margin = T_world_frame.translation().cwiseAbs().maxCoeff() +
+                        std::sqrt(3.0) * farthest + map_resolution_m_;
+  if (margin < MapHalfExtentM(map_resolution_m_)) return points;
+  inside_.assign(points, points + 3 * point_count);
+  constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+  for (std::size_t k = 0; k < point_count; ++k) {
+    float* p = &inside_[3 * k];
+    const Eigen::Vector3d q(p[0], p[1], p[2]);
+    if (!q.allFinite() || q.isZero()) continue;  // the beam grid's to count
+    // A beyond-range reading only gives its beam's direction: its free space is rendered up
+    // to the map's edge, never past it.
+    if (!beyond_range.empty() && beyond_range[k] != 0) continue;
+    if (InsideMap(T_world_frame * q, map_resolution_m_)) continue;
+    p[0] = p[1] = p[2] = kNaN;
+    ++*outside;
+  }
+  return inside_.data();
+}
+
 MapStatus SensorPeriods::Integrate(const Eigen::Isometry3d& T_world_sensor,
                                    const float* points_xyz, std::size_t point_count,
                                    const std::vector<std::uint8_t>& beyond_range, bool may_seal,
@@ -66,6 +104,9 @@ MapStatus SensorPeriods::Integrate(const Eigen::Isometry3d& T_world_sensor,
   if (points_xyz == nullptr && point_count != 0) return MapStatus::kInvalidArgument;
   if (!beyond_range.empty() && beyond_range.size() != point_count) {
     return MapStatus::kInvalidArgument;
+  }
+  if (map_resolution_m_ > 0.0 && !InsideMap(T_world_sensor.translation(), map_resolution_m_)) {
+    return MapStatus::kOutsideMap;
   }
   PeriodIntegration out;
   const float* points = points_xyz;
@@ -90,7 +131,11 @@ MapStatus SensorPeriods::Integrate(const Eigen::Isometry3d& T_world_sensor,
     }
   }
   if (open_->frames == 0) open_->T_world_sensor = T_world_sensor;
+  std::size_t outside = 0;
+  points = InsideMapOnly(open_->T_world_sensor, points, point_count, beyond_range, &outside);
   out.stats = open_->grid->Integrate(points, point_count, beyond_range);
+  out.stats.missing -= outside;  // made NaN above: counted as outside the map instead
+  out.stats.rejected_outside_map = outside;
   ++open_->frames;
   if (result != nullptr) *result = out;
   return MapStatus::kOk;

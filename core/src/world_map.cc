@@ -215,7 +215,8 @@ MapStatus WorldMap::Integrate(const std::string& sensor_id, const Eigen::Isometr
   if (!s->periods) {
     s->periods = std::make_unique<SensorPeriods>(s->spec, SensorGridOptions(options_),
                                                  options_.pose_tolerance_m,
-                                                 options_.pose_tolerance_rad);
+                                                 options_.pose_tolerance_rad,
+                                                 options_.resolution_m);
   }
   PeriodIntegration result;
   std::unique_ptr<Period> sealed;
@@ -244,8 +245,9 @@ MapStatus WorldMap::Integrate(const std::string& sensor_id, const Eigen::Isometr
   s->counters.points_updated += result.stats.updated;
   s->counters.points_beyond_range += result.stats.beyond_range;
   s->counters.points_missing += result.stats.missing;
-  s->counters.points_rejected +=
-      result.stats.rejected_nonfinite + result.stats.rejected_outside_fov;
+  s->counters.points_rejected += result.stats.rejected_nonfinite +
+                                 result.stats.rejected_outside_fov +
+                                 result.stats.rejected_outside_map;
   if (stats != nullptr) *stats = result.stats;
   return MapStatus::kOk;
 }

@@ -22,6 +22,9 @@ struct FusionWorker::Lane {
   // Guarded by work_mutex_.
   std::size_t sealed_waiting = 0;  // sealed periods not yet committed
   bool dirty = false;              // the open period has frames its last render did not see
+  // The integrator's own: points outside the map are logged at most once a second.
+  std::chrono::steady_clock::time_point last_outside_log{};
+  std::uint64_t outside_not_logged = 0;
   // The renderer's own (under map_mutex_).
   std::uint64_t live_sequence = 0;  // the period the map's live contribution renders
   std::uint64_t live_frames = 0;    // and how many of its frames
@@ -69,7 +72,8 @@ bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> history, std::string* 
     lane->counters = queues_->counters(sensor.id);
     lane->periods = std::make_unique<SensorPeriods>(sensor.spec, SensorGridOptions(options_.map),
                                                     options_.map.pose_tolerance_m,
-                                                    options_.map.pose_tolerance_rad);
+                                                    options_.map.pose_tolerance_rad,
+                                                    options_.map.resolution_m);
     lanes_.push_back(std::move(lane));
   }
   if (history) map_->LoadHistory(*history);
@@ -175,8 +179,25 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   c.points_updated.fetch_add(result.stats.updated, std::memory_order_relaxed);
   c.points_beyond_range.fetch_add(result.stats.beyond_range, std::memory_order_relaxed);
   c.points_missing.fetch_add(result.stats.missing, std::memory_order_relaxed);
-  c.points_rejected.fetch_add(result.stats.rejected_nonfinite + result.stats.rejected_outside_fov,
+  c.points_rejected.fetch_add(result.stats.rejected_nonfinite + result.stats.rejected_outside_fov +
+                                  result.stats.rejected_outside_map,
                               std::memory_order_relaxed);
+  if (result.stats.rejected_outside_map > 0) {
+    const auto now = std::chrono::steady_clock::now();
+    if (now - lane->last_outside_log < std::chrono::seconds(1)) {
+      lane->outside_not_logged += result.stats.rejected_outside_map;
+    } else {
+      spdlog::warn("worker: cloud {} of '{}': {} points outside the map (beyond +-{:.0f} m at "
+                   "{} m voxels) left out{}",
+                   cloud.sequence_number, cloud.sensor_id, result.stats.rejected_outside_map,
+                   MapHalfExtentM(options_.map.resolution_m), options_.map.resolution_m,
+                   lane->outside_not_logged > 0
+                       ? fmt::format(" [{} more since the last line]", lane->outside_not_logged)
+                       : "");
+      lane->last_outside_log = now;
+      lane->outside_not_logged = 0;
+    }
+  }
   spdlog::debug("worker: cloud {} of '{}': {} updated, {} beyond range, {} missing{}",
                 cloud.sequence_number, cloud.sensor_id, result.stats.updated,
                 result.stats.beyond_range, result.stats.missing,

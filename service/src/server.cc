@@ -106,6 +106,7 @@ bool FusionServer::Start(std::string* error) {
   ingest_options.limits.max_points = config_.ingest().max_points();
   ingest_options.limits.quaternion_tolerance = config_.ingest().quaternion_tolerance();
   ingest_options.limits.max_abs_translation_m = config_.ingest().max_abs_translation_m();
+  ingest_options.limits.map_resolution_m = config_.map().resolution_m();
   p.ingest = std::make_unique<DdsIngest>(p.queues.get(), ingest_options);
   if (!p.ingest->Start(participant_, error)) return false;
 

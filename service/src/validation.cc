@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "fusion/core/local_grid.h"
+
 namespace fusion::service {
 
 const char* RejectReasonName(RejectReason reason) {
@@ -22,6 +24,8 @@ const char* RejectReasonName(RejectReason reason) {
       return "non_unit_quaternion";
     case RejectReason::kAbsurdTranslation:
       return "absurd_translation";
+    case RejectReason::kOutsideMap:
+      return "outside_map";
     case RejectReason::kCount:
       break;
   }
@@ -77,6 +81,14 @@ std::optional<RejectReason> ValidateSample(
                 std::to_string(limits.max_abs_translation_m) + " m";
       return RejectReason::kAbsurdTranslation;
     }
+  }
+  if (limits.map_resolution_m > 0.0 &&
+      !InsideMap(Eigen::Vector3d(p.tx, p.ty, p.tz), limits.map_resolution_m)) {
+    *detail = "position (" + std::to_string(p.tx) + ", " + std::to_string(p.ty) + ", " +
+              std::to_string(p.tz) + ") m lies beyond the map's +-" +
+              std::to_string(MapHalfExtentM(limits.map_resolution_m)) + " m at " +
+              std::to_string(limits.map_resolution_m) + " m voxels";
+    return RejectReason::kOutsideMap;
   }
   return std::nullopt;
 }

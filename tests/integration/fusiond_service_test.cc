@@ -470,6 +470,10 @@ TEST_F(FusiondServiceTest, MalformedCloudsAndBadRequestsAreRejectedWhileServing)
   bad.back().second.height = 1000;
   bad.emplace_back("absurd_translation", good());
   bad.back().second.tz = 1e9;
+  // 5 km away: within ingest.max_abs_translation_m, but beyond the map's keys at 5 cm
+  // (+-1638.4 m), where its voxels would wrap around to x = 5000 - 3276.8 m.
+  bad.emplace_back("outside_map", good());
+  bad.back().second.tx = 5000.0;
   bad.emplace_back("unknown_sensor", good());
   bad.back().second.sensor_id = "ghost";
   for (auto& [reason, cloud] : bad) {
@@ -485,10 +489,10 @@ TEST_F(FusiondServiceTest, MalformedCloudsAndBadRequestsAreRejectedWhileServing)
   const auto end = std::chrono::steady_clock::now() + 10s;
   while (std::chrono::steady_clock::now() < end) {
     counters = SrCounters();
-    if (counters.rejected() == 6 && counters.integrated() == integrated_before + 1) break;
+    if (counters.rejected() == 7 && counters.integrated() == integrated_before + 1) break;
     std::this_thread::sleep_for(50ms);
   }
-  EXPECT_EQ(counters.rejected(), 6u);
+  EXPECT_EQ(counters.rejected(), 7u);
   EXPECT_EQ(counters.integrated(), integrated_before + 1);
   EXPECT_EQ(counters.last_sequence_number(), 99u);
   for (const auto& [reason, cloud] : bad) {
@@ -499,7 +503,9 @@ TEST_F(FusiondServiceTest, MalformedCloudsAndBadRequestsAreRejectedWhileServing)
         << reason;
   }
   const auto stats = Stats();
-  EXPECT_EQ(stats.clouds_rejected(), 7u);
+  EXPECT_EQ(stats.clouds_rejected(), 8u);
+  // Nothing of the far cloud was written where its voxels would have wrapped to.
+  EXPECT_EQ(Occupancy({5000.0 - 2 * 1638.4, 0.0, 1.5}).state(), v1::VOXEL_STATE_UNKNOWN);
   ASSERT_EQ(stats.rejected_by_reason().count("unknown_sensor"), 1u);
   EXPECT_EQ(stats.rejected_by_reason().at("unknown_sensor"), 1u);
 

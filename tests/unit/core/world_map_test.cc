@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "fusion/core/fusion_rules.h"
@@ -61,6 +62,8 @@ class WorldMapTest : public ::testing::Test {
     return map->Integrate(id, T, c.xyz.data(), c.size(), c.beyond_range, nullptr, committed);
   }
 
+  void ExpectNothingOutsideTheMap();
+
   SensorSpec spec_;
   sim::RangeSimulator simulator_;
   Eigen::Isometry3d pose_;
@@ -87,6 +90,73 @@ TEST_F(WorldMapTest, RejectsBadInput) {
   EXPECT_EQ(map.version(), 0u);
   EXPECT_EQ(map.tree().size(), 0u);
   EXPECT_STREQ(MapStatusName(MapStatus::kInvalidPose), "invalid pose");
+}
+
+// OctoMap's keys cover +-32768 voxels: beyond, a voxel would wrap around to the far side.
+TEST(MapExtent, InsideMapMatchesTheKeyRange) {
+  EXPECT_DOUBLE_EQ(MapHalfExtentM(0.02), 655.36);
+  EXPECT_TRUE(InsideMap({655.35, -655.36, 0.0}, 0.02));
+  EXPECT_FALSE(InsideMap({655.37, 0.0, 0.0}, 0.02));
+  EXPECT_FALSE(InsideMap({0.0, -655.37, 0.0}, 0.02));
+  EXPECT_FALSE(InsideMap({0.0, 0.0, std::nan("")}, 0.02));
+  octomap::OcTree tree(0.02);
+  octomap::OcTreeKey key;
+  EXPECT_TRUE(tree.coordToKeyChecked(octomap::point3d(655.35f, -655.36f, 0.0f), key));
+  EXPECT_EQ(key, KeyOfPoint({655.35, -655.36, 0.0}, 0.02));
+}
+
+// A pose beyond the keys is refused with nothing touched; near the edge, readings beyond it are
+// left out and counted, and the render's rays stop at the edge instead of wrapping around.
+TEST_F(WorldMapTest, NothingOutsideTheMapIsWrittenOrWrapped) {
+  for (const RenderMethod method : {RenderMethod::kProjective, RenderMethod::kRayTraced}) {
+    SCOPED_TRACE(method == RenderMethod::kProjective ? "projective" : "ray-traced");
+    options_.render.method = method;
+    ExpectNothingOutsideTheMap();
+  }
+}
+
+void WorldMapTest::ExpectNothingOutsideTheMap() {
+  WorldMap map(options_);
+  ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
+  const double half = MapHalfExtentM(kRes);
+  const BeamTessellation tess(spec_);
+  // Every even beam reads a surface at 0.995 m (the edge is 1 m ahead: the reading's
+  // distribution runs past it), every odd one 2.5 m (beyond the edge), and the last row nothing
+  // within range.
+  std::vector<float> xyz;
+  std::vector<std::uint8_t> beyond;
+  std::size_t beyond_edge = 0;
+  for (std::size_t b = 0; b < tess.beam_count(); ++b) {
+    const bool last_row = b >= tess.beam_count() - static_cast<std::size_t>(tess.cols());
+    const double range = last_row ? spec_.r_max_m : (b % 2 == 0 ? 0.995 : 2.5);
+    const Eigen::Vector3d p = range * tess.Direction(b);
+    xyz.insert(xyz.end(), {float(p.x()), float(p.y()), float(p.z())});
+    beyond.push_back(last_row ? 1 : 0);
+    beyond_edge += !last_row && b % 2 == 1;
+  }
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()).toRotationMatrix();  // z -> x
+  T.translation() = Eigen::Vector3d(half + 5.0, 0.0, 0.0);
+  EXPECT_EQ(map.Integrate("sr", T, xyz.data(), tess.beam_count(), beyond), MapStatus::kOutsideMap);
+  EXPECT_EQ(map.version(), 0u);
+  EXPECT_EQ(map.Counters("sr")->frames_integrated, 0u);
+  T.translation() = Eigen::Vector3d(half - 1.0, 0.0, 0.0);
+  IntegrationStats stats;
+  ASSERT_EQ(map.Integrate("sr", T, xyz.data(), tess.beam_count(), beyond, &stats), MapStatus::kOk);
+  EXPECT_EQ(stats.rejected_outside_map, beyond_edge);
+  EXPECT_EQ(stats.updated, tess.beam_count() - beyond_edge - tess.cols());
+  EXPECT_EQ(map.Counters("sr")->points_rejected, beyond_edge);
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  std::size_t leaves = 0, at_edge = 0;
+  for (auto it = map.tree().begin_leafs(); it != map.tree().end_leafs(); ++it) {
+    ++leaves;
+    const double x_lo = it.getX() - 0.5 * it.getSize();
+    EXPECT_GT(x_lo, half - 1.0 - it.getSize()) << "a voxel behind the sensor or wrapped around";
+    EXPECT_LE(it.getX() + 0.5 * it.getSize(), half + 1e-6);
+    at_edge += it.getX() > half - 0.1;
+  }
+  EXPECT_GT(leaves, 100u);
+  EXPECT_GT(at_edge, 0u) << "the free space of the beyond-range beams runs up to the edge";
 }
 
 TEST_F(WorldMapTest, RenderingTheSamePeriodTwiceLeavesTheMapUnchanged) {
@@ -452,7 +522,9 @@ TEST_F(WorldMapTest, LeavingOutSaturatedFreeSpaceGivesTheSameMap) {
     ASSERT_EQ(periods.Integrate(T, cloud.xyz.data(), cloud.size(), cloud.beyond_range, true,
                                 &result, &sealed),
               MapStatus::kOk);
-    if (sealed) ASSERT_EQ(without.CommitLive("sr"), MapStatus::kOk);
+    if (sealed) {
+      ASSERT_EQ(without.CommitLive("sr"), MapStatus::kOk);
+    }
     const Period& open = periods.open();
     ASSERT_EQ(without.ReplaceLive("sr", Render(*open.grid, open.T_world_sensor,
                                                MapRenderOptions(options_))),

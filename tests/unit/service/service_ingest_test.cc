@@ -125,6 +125,21 @@ TEST(ServiceIngestTest, EveryMalformationHasItsReason) {
     s.msg.T_world_sensor.tz = -1e6;
     EXPECT_EQ(Check(s), RejectReason::kAbsurdTranslation);
   }
+  {
+    // Beyond the map's keys at 2 cm (+-655.36 m), well within max_abs_translation_m.
+    IngestLimits limits;
+    limits.map_resolution_m = 0.02;
+    Sample s;
+    s.msg.T_world_sensor.tx = 655.0;
+    EXPECT_EQ(Check(s, limits), std::nullopt);
+    s.msg.T_world_sensor.tx = 700.0;
+    EXPECT_EQ(Check(s, limits), RejectReason::kOutsideMap);
+    s.msg.T_world_sensor.tx = 0.0;
+    s.msg.T_world_sensor.ty = -5000.0;
+    EXPECT_EQ(Check(s, limits), RejectReason::kOutsideMap);
+    limits.map_resolution_m = 0.2;  // +-6553.6 m
+    EXPECT_EQ(Check(s, limits), std::nullopt);
+  }
 }
 
 TEST(ServiceIngestTest, ReasonNamesAreDistinct) {

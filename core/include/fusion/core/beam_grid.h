@@ -98,6 +98,7 @@ struct IntegrationStats {
   std::size_t missing = 0;             // NaN / zero points: no information, beam untouched
   std::size_t rejected_nonfinite = 0;  // inf or mixed NaN coordinates
   std::size_t rejected_outside_fov = 0;
+  std::size_t rejected_outside_map = 0;  // world position beyond the map's keys (SensorPeriods)
 };
 
 // Where a beam's information lies, from a start range on (BeamGrid::Profile).

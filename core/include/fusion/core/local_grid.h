@@ -99,8 +99,14 @@ struct RenderStats {
   std::size_t skipped_saturated = 0;
 };
 
+// OctoMap's keys cover 32768 voxels on either side of the origin on every axis: a world point
+// lies in the map iff -MapHalfExtentM(res) <= p_a < MapHalfExtentM(res) for each axis (at 2 cm,
+// +-655 m). Beyond, a key would wrap around to the far side of the map.
+[[nodiscard]] double MapHalfExtentM(double resolution_m);
+[[nodiscard]] bool InsideMap(const Eigen::Vector3d& p_world, double resolution_m);
+
 // World-frame voxel key of a point at the given resolution; identical to
-// octomap::OcTree(resolution_m).coordToKey(p) (tree depth 16).
+// octomap::OcTree(resolution_m).coordToKey(p) (tree depth 16). The point must be InsideMap.
 [[nodiscard]] octomap::OcTreeKey KeyOfPoint(const Eigen::Vector3d& p_world, double resolution_m);
 // Centre of a voxel, world frame, metres.
 [[nodiscard]] Eigen::Vector3d KeyCenter(const octomap::OcTreeKey& key, double resolution_m);

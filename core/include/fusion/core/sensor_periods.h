@@ -26,6 +26,7 @@ enum class MapStatus {
   kDuplicateSensor,
   kInvalidPose,      // non-finite translation or a non-rotation matrix
   kInvalidArgument,  // e.g. null points with a non-zero count
+  kOutsideMap,       // the sensor's position lies beyond the map's keys (InsideMap)
 };
 [[nodiscard]] const char* MapStatusName(MapStatus status);
 
@@ -47,13 +48,17 @@ struct PeriodIntegration {
 
 class SensorPeriods {
  public:
+  // map_resolution_m > 0: poses and points are checked against the map's key range at that
+  // resolution (InsideMap); 0: not checked.
   SensorPeriods(const SensorSpec& spec, const BeamGridOptions& grid_options,
-                double pose_tolerance_m, double pose_tolerance_rad);
+                double pose_tolerance_m, double pose_tolerance_rad, double map_resolution_m = 0.0);
 
   // Applies one cloud (sensor frame, 3 floats per point; beyond_range as BeamGrid::Integrate)
   // taken at T_world_sensor. If the pose left the tolerance of a non-empty open period and
   // may_seal, that period is moved to *sealed and a new one opened; without may_seal the cloud
-  // is merged. Statuses for a bad pose or bad arguments (nothing is touched then).
+  // is merged. Statuses for a bad pose, a pose outside the map or bad arguments (nothing is
+  // touched then). Points whose world position lies outside the map are left out and counted
+  // (IntegrationStats::rejected_outside_map).
   MapStatus Integrate(const Eigen::Isometry3d& T_world_sensor, const float* points_xyz,
                       std::size_t point_count, const std::vector<std::uint8_t>& beyond_range,
                       bool may_seal, PeriodIntegration* result, std::unique_ptr<Period>* sealed);
@@ -71,6 +76,11 @@ class SensorPeriods {
 
  private:
   [[nodiscard]] bool Moved(const Eigen::Isometry3d& T_world_sensor) const;
+  // `points` (in the frame T_world_frame) without the range readings outside the map (made
+  // NaN, counted); `points` itself when none can be.
+  const float* InsideMapOnly(const Eigen::Isometry3d& T_world_frame, const float* points,
+                             std::size_t point_count, const std::vector<std::uint8_t>& beyond_range,
+                             std::size_t* outside);
   std::unique_ptr<Period> NewPeriod();
 
   SensorSpec spec_;
@@ -80,7 +90,9 @@ class SensorPeriods {
   std::unique_ptr<Period> open_;
   std::unique_ptr<Period> spare_;  // a recycled period, grid reset
   std::uint64_t sequence_ = 0;
-  std::vector<float> moved_;  // points of a merged cloud in the open period's frame
+  double map_resolution_m_;
+  std::vector<float> moved_;   // points of a merged cloud in the open period's frame
+  std::vector<float> inside_;  // points without those outside the map
 };
 
 }  // namespace fusion

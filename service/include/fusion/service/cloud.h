@@ -31,6 +31,7 @@ enum class RejectReason : int {
   kNonFinitePose,
   kNonUnitQuaternion,
   kAbsurdTranslation,
+  kOutsideMap,  // the pose lies beyond the map's keys (they would wrap around)
   kCount,
 };
 constexpr std::size_t kRejectReasonCount = static_cast<std::size_t>(RejectReason::kCount);

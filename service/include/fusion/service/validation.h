@@ -15,6 +15,9 @@ struct IngestLimits {
   std::uint32_t max_points = 4'000'000;
   double quaternion_tolerance = 1e-3;  // | |q| - 1 | above this is rejected
   double max_abs_translation_m = 1e5;  // per axis
+  // > 0: a pose whose position lies beyond the map's keys at this resolution (core's InsideMap:
+  // +-32768 voxels a side, +-655 m at 2 cm) is rejected as outside_map.
+  double map_resolution_m = 0.0;
 };
 
 // std::nullopt if the sample may be converted and integrated; otherwise the reason, with
