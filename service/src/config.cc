@@ -74,6 +74,28 @@ bool ValidateMap(const fusion::v1::MapConfig& map, std::string* error) {
   return true;
 }
 
+// A beam's cells (r_max_m / map.beam_cell_size_m): core keeps a few tables of that length per
+// sensor, so the count is bounded (2 km at the default 2 mm cells).
+constexpr double kMaxCellsPerBeam = 1e6;
+
+bool ValidateBeamLengths(const fusion::v1::ServiceConfig& config, std::string* error) {
+  const double cell_m = config.map().beam_cell_size_m();
+  for (int i = 0; i < config.sensors_size(); ++i) {
+    std::string detail;
+    const auto setup = SensorSetupFromConfig(config.sensors(i), &detail);
+    if (!setup) continue;  // reported by ValidateSensors
+    const double cells = setup->spec.r_max_m / cell_m;
+    if (!(cells <= kMaxCellsPerBeam)) {
+      std::ostringstream message;
+      message << setup->spec.r_max_m << " m in beam cells of " << cell_m
+              << " m (map.beam_cell_size_m) is " << cells
+              << " cells, more than 1000000: lower r_max_m or raise map.beam_cell_size_m";
+      return Fail(error, "sensors[" + std::to_string(i) + "].r_max_m", message.str());
+    }
+  }
+  return true;
+}
+
 bool ValidateIngest(const fusion::v1::IngestConfig& ingest, std::string* error) {
   if (ingest.reliability() != "best_effort" && ingest.reliability() != "reliable") {
     return Fail(error, "ingest.reliability",
@@ -194,7 +216,8 @@ bool ValidateConfig(const fusion::v1::ServiceConfig& config, std::string* error)
     return false;
   }
   return ValidateSensors(config, error) && ValidateMap(config.map(), error) &&
-         ValidateIngest(config.ingest(), error) && ValidateLimits(config.limits(), error);
+         ValidateBeamLengths(config, error) && ValidateIngest(config.ingest(), error) &&
+         ValidateLimits(config.limits(), error);
 }
 
 bool ParseSensorFlag(const std::string& value, fusion::v1::SensorConfig* sensor,

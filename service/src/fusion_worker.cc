@@ -58,6 +58,22 @@ FusionWorker::~FusionWorker() { Stop(); }
 
 bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> history, std::string* error) {
   std::lock_guard<std::mutex> lock(map_mutex_);
+  try {
+    if (!StartLocked(std::move(history), error)) return false;
+  } catch (const std::exception& e) {  // core refuses what validation let through
+    *error = std::string("the map could not be set up: ") + e.what();
+    return false;
+  }
+  // spdlog's registry is a function-local static of an uninstrumented library: create it here,
+  // before the threads that log, so its construction happens before their first use (what the
+  // thread sanitizer can see; fusiond's main has logged long before, a test may not have).
+  (void)spdlog::default_logger_raw();
+  integrator_ = std::thread([this] { IntegratorLoop(); });
+  renderer_ = std::thread([this] { RendererLoop(); });
+  return true;
+}
+
+bool FusionWorker::StartLocked(std::unique_ptr<octomap::OcTree> history, std::string* error) {
   WorldMapOptions map_options = options_.map;
   map_options.occupancy_threshold = options_.thresholds.occupied;
   map_ = std::make_unique<WorldMap>(map_options);
@@ -78,12 +94,6 @@ bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> history, std::string* 
   }
   if (history) map_->LoadHistory(*history);
   PublishLocked();
-  // spdlog's registry is a function-local static of an uninstrumented library: create it here,
-  // before the threads that log, so its construction happens before their first use (what the
-  // thread sanitizer can see; fusiond's main has logged long before, a test may not have).
-  (void)spdlog::default_logger_raw();
-  integrator_ = std::thread([this] { IntegratorLoop(); });
-  renderer_ = std::thread([this] { RendererLoop(); });
   return true;
 }
 

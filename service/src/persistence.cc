@@ -1,6 +1,7 @@
 #include "fusion/service/persistence.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -8,8 +9,10 @@
 #include <cmath>
 #include <cstring>
 #include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
 namespace fusion::service {
 namespace {
@@ -69,6 +72,59 @@ bool ParseHeader(std::istream& in, std::string* id, std::uint64_t* size, double*
 
 }  // namespace
 
+namespace {
+
+// OctoMap's .ot node data, checked without building anything: every node is 4 bytes of
+// log-odds and a byte of child flags, children follow their parent depth first. OctoMap's own
+// reader recurses once per level and trusts the flags, so a crafted chain of 200 k nodes
+// overflowed the stack. Here: an explicit stack, at most 16 levels below the root, finite
+// values, and exactly `nodes` nodes in `data`. Empty if the structure holds, else the problem.
+std::string CheckOtNodes(const std::string& data, std::uint64_t nodes) {
+  constexpr int kMaxDepth = 16;  // octomap's tree_depth
+  std::uint64_t read = 0;
+  std::size_t at = 0;
+  const auto next = [&](std::uint8_t* children) -> std::string {
+    if (read == nodes || at + 5 > data.size()) {
+      return "its child flags ask for more than the " + std::to_string(nodes) +
+             " nodes the header declares";
+    }
+    float log_odds = 0.0f;
+    std::memcpy(&log_odds, data.data() + at, sizeof log_odds);
+    *children = static_cast<std::uint8_t>(data[at + 4]);
+    at += 5;
+    ++read;
+    if (!std::isfinite(log_odds)) return "node " + std::to_string(read) + " is not finite";
+    return {};
+  };
+  struct Open {
+    int depth;
+    std::uint8_t pending;  // children not yet read
+  };
+  std::vector<Open> stack;
+  std::uint8_t children = 0;
+  if (std::string problem = next(&children); !problem.empty()) return problem;
+  stack.push_back({0, children});
+  while (!stack.empty()) {
+    Open& top = stack.back();
+    if (top.pending == 0) {
+      stack.pop_back();
+      continue;
+    }
+    top.pending &= static_cast<std::uint8_t>(top.pending - 1);  // the lowest child: read it
+    const int depth = top.depth + 1;
+    if (depth > kMaxDepth) return "it is deeper than OctoMap's 16 levels";
+    if (std::string problem = next(&children); !problem.empty()) return problem;
+    stack.push_back({depth, children});
+  }
+  if (read != nodes) {
+    return "the header declares " + std::to_string(nodes) + " nodes, the tree holds " +
+           std::to_string(read);
+  }
+  return {};
+}
+
+}  // namespace
+
 std::string SerializeOt(const octomap::OcTree& tree) {
   std::ostringstream out(std::ios::binary);
   tree.write(out);
@@ -115,6 +171,28 @@ bool WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path, std
   return true;
 }
 
+std::vector<std::string> RemoveStaleTempFiles(const std::string& path) {
+  std::vector<std::string> removed;
+  const std::filesystem::path target(path);
+  const std::string prefix = target.filename().string() + ".tmp-";
+  std::error_code ec;
+  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
+  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string digits = name.substr(prefix.size());
+    if (digits.empty() || digits.size() > 9 ||
+        digits.find_first_not_of("0123456789") != std::string::npos) {
+      continue;
+    }
+    const auto pid = static_cast<pid_t>(std::stol(digits));
+    // A writer that still runs (kill(pid, 0) succeeds or is not allowed) keeps its file.
+    if (pid == ::getpid() || ::kill(pid, 0) == 0 || errno != ESRCH) continue;
+    if (std::filesystem::remove(entry.path(), ec)) removed.push_back(entry.path().string());
+  }
+  return removed;
+}
+
 LoadStatus LoadSnapshotFile(const std::string& path, double expected_resolution_m,
                             std::unique_ptr<octomap::OcTree>* tree, std::string* message) {
   std::ifstream in(path, std::ios::binary);
@@ -142,6 +220,11 @@ LoadStatus LoadSnapshotFile(const std::string& path, double expected_resolution_
       problem = "header declares " + std::to_string(size) + " nodes (" + std::to_string(5 * size) +
                 " bytes) but " + std::to_string(data_bytes) +
                 " bytes follow (truncated or damaged)";
+    } else if (std::string data(data_bytes, '\0');
+               !in.seekg(data_start).read(data.data(), static_cast<std::streamsize>(data_bytes))) {
+      problem = "cannot read its node data";
+    } else if (const std::string structure = CheckOtNodes(data, size); !structure.empty()) {
+      problem = "not a valid octree: " + structure;
     } else {
       in.seekg(0);
       std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(in));

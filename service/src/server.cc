@@ -62,6 +62,11 @@ bool FusionServer::Start(std::string* error) {
   // The last snapshot, if any: loaded, or set aside when corrupt.
   const auto& persistence = config_.persistence();
   std::unique_ptr<octomap::OcTree> base;
+  if (!persistence.path().empty()) {
+    for (const std::string& stale : RemoveStaleTempFiles(persistence.path())) {
+      spdlog::warn("snapshot: removed {}, left by a write that was killed", stale);
+    }
+  }
   if (!persistence.path().empty() &&
       (!persistence.has_load_on_start() || persistence.load_on_start())) {
     std::string message;

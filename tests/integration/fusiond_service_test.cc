@@ -390,9 +390,14 @@ TEST_F(FusiondServiceTest, KillNineRestartRestoresThePeriodicSnapshot) {
     }
   }
   ASSERT_TRUE(saved) << "no periodic snapshot with the board in " << snapshot_;
+  const pid_t killed = fusiond->pid();
   EXPECT_EQ(fusiond->Stop(SIGKILL, 10s), 128 + SIGKILL);
+  // What a kill -9 in the middle of a write leaves: the restart removes it.
+  const std::string stale = snapshot_ + ".tmp-" + std::to_string(killed);
+  std::ofstream(stale) << "half a snapshot";
   auto restarted = Start();
   ASSERT_TRUE(restarted);
+  EXPECT_FALSE(fs::exists(stale)) << "stale temporary file left behind";
   EXPECT_EQ(Occupancy(kOnBoard).state(), v1::VOXEL_STATE_OCCUPIED);
   EXPECT_EQ(restarted->Stop(SIGTERM, 15s), 0);
 }
@@ -581,6 +586,8 @@ TEST_F(FusiondServiceTest, RefusesABadConfigurationNamingTheField) {
        R"(fusiond: sensors\[0\]\.fov_h_deg: )"},
       {"map { fusion_rule: \"average\" }", R"(fusiond: map\.fusion_rule: )"},
       {"ingest { reliability: \"sometimes\" }", R"(fusiond: ingest\.reliability: )"},
+      // Once an abort in core ("beam too long for the cell size").
+      {"sensors { id: \"sr\" preset: \"sr3000\" r_max_m: 1e9 }", R"(fusiond: sensors\[0\]\.r_max_m: )"},
   };
   for (const auto& [text, field] : cases) {
     std::ofstream(config_) << text << "\n";

@@ -82,6 +82,10 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
        "sensors[1].id"},
       {"sensors { id: \"a\" preset: \"sr3000\" fov_h_deg: 0 }", "sensors[0].fov_h_deg"},
       {"sensors { id: \"a\" preset: \"sr3000\" r_max_m: 0.1 }", "sensors[0].r_max_m"},
+      // Refused, not an abort in core ("beam too long for the cell size").
+      {"sensors { id: \"a\" preset: \"sr3000\" r_max_m: 1e9 }", "sensors[0].r_max_m"},
+      {"sensors { id: \"a\" preset: \"sr3000\" r_max_m: 1e39 }", "sensors[0].r_max_m"},
+      {"sensors { id: \"a\" preset: \"sr3000\" r_max_m: 2500 }", "sensors[0].r_max_m"},
       {"sensors { id: \"a\" preset: \"sr3000\" cols: 100000 rows: 100000 }", "sensors[0].cols"},
       {"sensors { id: \"a\" r_min_m: 0.1 r_max_m: 5 fov_h_deg: 40 fov_v_deg: 30 cols: 10 }",
        "sensors[0].rows"},

@@ -1,6 +1,10 @@
 // Snapshot files: atomic write, load, truncated / garbage files set aside, resolution checked.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <functional>
+#include <vector>
+
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -81,6 +85,50 @@ TEST_F(ServicePersistenceTest, TruncatedAndGarbageFilesAreSetAside) {
     }
     EXPECT_EQ(CountCorrupt(), before + 1);
   }
+}
+
+// A .ot of `nodes` nodes (values `log_odds`), each node's flags from `flags(k)`.
+std::string CraftedOt(std::uint64_t nodes, const std::function<std::uint8_t(std::uint64_t)>& flags,
+                      float log_odds = 0.5f) {
+  std::string out = "# Octomap OcTree file\nid OcTree\nsize " + std::to_string(nodes) +
+                    "\nres 0.05\ndata\n";
+  for (std::uint64_t k = 0; k < nodes; ++k) {
+    out.append(reinterpret_cast<const char*>(&log_odds), sizeof log_odds);
+    out.push_back(static_cast<char>(flags(k)));
+  }
+  return out;
+}
+
+// Once a crash loop: OctoMap's reader recursed down a crafted chain until the stack ran out.
+TEST_F(ServicePersistenceTest, CraftedStructuresAreSetAsideNotLoaded) {
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      // 200 k nodes, each the only child of the one before: consistent counts, 200 k levels.
+      {CraftedOt(200'000, [](std::uint64_t k) { return k + 1 < 200'000 ? 1 : 0; }), "deeper"},
+      // 17 levels: one more than OctoMap's depth.
+      {CraftedOt(18, [](std::uint64_t k) { return k + 1 < 18 ? 0x80 : 0; }), "deeper"},
+      // Flags asking for more children than the header's nodes.
+      {CraftedOt(3, [](std::uint64_t) { return 0xff; }), "more than"},
+      // Fewer nodes in the tree than the header declares (the rest is trailing garbage).
+      {CraftedOt(5, [](std::uint64_t k) { return k == 0 ? 1 : 0; }), "holds 2"},
+      {CraftedOt(1, [](std::uint64_t) { return 0; }, std::nanf("")), "not finite"},
+  };
+  for (const auto& [bytes, why] : cases) {
+    std::ofstream(path_, std::ios::binary) << bytes;
+    std::unique_ptr<octomap::OcTree> loaded;
+    std::string message;
+    EXPECT_EQ(LoadSnapshotFile(path_, 0.05, &loaded, &message), LoadStatus::kCorrupt) << why;
+    EXPECT_EQ(loaded, nullptr);
+    EXPECT_NE(message.find(why), std::string::npos) << message;
+    EXPECT_FALSE(fs::exists(path_)) << "set aside";
+  }
+  // A legitimate deep tree (one voxel at depth 16) still loads.
+  octomap::OcTree one(0.05);
+  one.updateNode(octomap::point3d(1.0f, 2.0f, 3.0f), true);
+  std::string error;
+  ASSERT_TRUE(WriteSnapshotFile(one, path_, nullptr, &error)) << error;
+  std::unique_ptr<octomap::OcTree> loaded;
+  ASSERT_EQ(LoadSnapshotFile(path_, 0.05, &loaded, &error), LoadStatus::kLoaded) << error;
+  EXPECT_EQ(loaded->size(), one.size());
 }
 
 TEST_F(ServicePersistenceTest, OtherResolutionIsRefusedNotSetAside) {

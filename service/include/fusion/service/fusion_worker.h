@@ -94,6 +94,8 @@ class FusionWorker {
     std::unique_ptr<Period> period;
   };
 
+  // Start's part under map_mutex_: the map, the sensors' lanes, the first publication.
+  bool StartLocked(std::unique_ptr<octomap::OcTree> history, std::string* error);
   void IntegratorLoop();
   void RendererLoop();
   void Integrate(const Cloud& cloud);

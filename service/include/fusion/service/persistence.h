@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace fusion::service {
 
@@ -27,6 +28,10 @@ enum class LoadStatus {
 // instead of being half-loaded. *message explains anything but kLoaded / kMissing.
 LoadStatus LoadSnapshotFile(const std::string& path, double expected_resolution_m,
                             std::unique_ptr<octomap::OcTree>* tree, std::string* message);
+
+// Removes the temporary files WriteSnapshotFile leaves when its process is killed mid-write
+// (<path>.tmp-<pid>, for a pid that no longer runs); returns their names.
+std::vector<std::string> RemoveStaleTempFiles(const std::string& path);
 
 // Serialises a tree as .ot (full, log-odds) or .bt (maximum likelihood) bytes.
 std::string SerializeOt(const octomap::OcTree& tree);
