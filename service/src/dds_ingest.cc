@@ -141,7 +141,8 @@ void DdsIngest::LogRejection(RejectReason reason, const std::string& sensor_id,
     return;
   }
   last_log_[i] = now;
-  spdlog::warn("ingest: rejected cloud from '{}' ({}): {}{}", sensor_id, RejectReasonName(reason),
+  spdlog::warn("ingest: rejected cloud from '{}' ({}): {}{}", LoggableText(sensor_id),
+               RejectReasonName(reason),
                detail,
                suppressed_[i] > 0 ? fmt::format(" [{} more not logged]", suppressed_[i]) : "");
   suppressed_[i] = 0;

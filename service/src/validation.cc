@@ -1,5 +1,6 @@
 #include "fusion/service/validation.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "fusion/core/local_grid.h"
@@ -32,6 +33,28 @@ const char* RejectReasonName(RejectReason reason) {
   return "unknown_reason";
 }
 
+std::string LoggableText(std::string_view text, std::size_t max_bytes) {
+  std::string out;
+  const std::size_t kept = std::min(text.size(), max_bytes);
+  for (std::size_t i = 0; i < kept; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c == '\n') {
+      out += "\\n";
+    } else if (c == '\\') {
+      out += "\\\\";
+    } else if (c < 0x20 || c >= 0x7f) {
+      static const char kHex[] = "0123456789abcdef";
+      out += "\\x";
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  if (kept < text.size()) out += "...(" + std::to_string(text.size()) + " bytes)";
+  return out;
+}
+
 std::optional<RejectReason> ValidateSample(
     const fusion_dds_PointCloud& sample, const IngestLimits& limits,
     const std::function<bool(const std::string&)>& is_known_sensor, std::string* detail) {
@@ -41,7 +64,7 @@ std::optional<RejectReason> ValidateSample(
   }
   const std::string id = sample.sensor_id;
   if (!is_known_sensor(id)) {
-    *detail = "sensor '" + id + "' is not configured";
+    *detail = "sensor '" + LoggableText(id) + "' is not configured";
     return RejectReason::kUnknownSensor;
   }
   // 64-bit products: width * height of two uint32 cannot overflow.

@@ -38,10 +38,12 @@ struct Sample {
   }
 };
 
-std::optional<RejectReason> Check(Sample& s, IngestLimits limits = {}) {
+std::optional<RejectReason> Check(Sample& s, IngestLimits limits = {},
+                                  std::string* detail_out = nullptr) {
   std::string detail;
   const auto reason = ValidateSample(
       s.Get(), limits, [](const std::string& id) { return id == "sr"; }, &detail);
+  if (detail_out != nullptr) *detail_out = detail;
   if (reason) {
     EXPECT_FALSE(detail.empty());
   }
@@ -149,6 +151,21 @@ TEST(ServiceIngestTest, ReasonNamesAreDistinct) {
   }
   EXPECT_EQ(names.size(), kRejectReasonCount);
   EXPECT_EQ(names.count("unknown_reason"), 0u);
+}
+
+// An id with a newline once forged a second log line; a 10 KB id was logged whole.
+TEST(ServiceIngestTest, UntrustedTextIsEscapedAndTruncatedForTheLog) {
+  EXPECT_EQ(LoggableText("sr3000"), "sr3000");
+  EXPECT_EQ(LoggableText("a\n[error] forged"), "a\\n[error] forged");
+  EXPECT_EQ(LoggableText(std::string("t\tb\\\x1b[31m\xff", 10)), "t\\x09b\\\\\\x1b[31m\\xff");
+  const std::string long_id(10'000, 'x');
+  EXPECT_EQ(LoggableText(long_id), std::string(64, 'x') + "...(10000 bytes)");
+  Sample s;
+  s.id = "ghost\nINFO all fine";
+  std::string detail;
+  ASSERT_EQ(Check(s, IngestLimits{}, &detail), RejectReason::kUnknownSensor);
+  EXPECT_EQ(detail.find('\n'), std::string::npos) << detail;
+  EXPECT_NE(detail.find("ghost\\nINFO"), std::string::npos) << detail;
 }
 
 Cloud MakeCloud(const std::string& id, std::uint64_t seq) {

@@ -5,6 +5,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include "fusion/service/cloud.h"
 #include "fusion_dds.h"
@@ -19,6 +20,11 @@ struct IngestLimits {
   // +-32768 voxels a side, +-655 m at 2 cm) is rejected as outside_map.
   double map_resolution_m = 0.0;
 };
+
+// Untrusted text (a sample's sensor id, a topic name) as it may appear in a log line: control
+// characters, backslashes and bytes outside printable ASCII escaped (\n, \xNN), at most
+// max_bytes of the original kept ("...(N bytes)" says how long it was).
+[[nodiscard]] std::string LoggableText(std::string_view text, std::size_t max_bytes = 64);
 
 // std::nullopt if the sample may be converted and integrated; otherwise the reason, with
 // *detail saying what exactly was wrong (for the log).
