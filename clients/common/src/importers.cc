@@ -272,7 +272,7 @@ Status ReadPcd(const std::string& path, fusion::v1::RecordedCloud* cloud, bool a
     std::size_t eol = content.find('\n', pos);
     if (eol == std::string::npos) eol = content.size();
     std::string line = content.substr(pos, eol - pos);
-    pos = eol + 1;
+    pos = std::min(eol + 1, content.size());  // a last line without '\n' ends the file
     ++line_number;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#') continue;
@@ -331,9 +331,15 @@ Status ReadPcd(const std::string& path, fusion::v1::RecordedCloud* cloud, bool a
   if (points > (1ull << 28)) return error("implausible point count " + std::to_string(points));
   std::size_t point_step = 0, values_per_point = 0;
   int xyz_field[3] = {-1, -1, -1};
+  // A point of at most 1 MiB (and so points x point size below 2^48: no overflow below).
+  constexpr std::size_t kMaxPointBytes = std::size_t{1} << 20;
   for (std::size_t i = 0; i < fields.size(); ++i) {
     fields[i].offset_bytes = point_step;
     fields[i].first_value = values_per_point;
+    if (fields[i].count > kMaxPointBytes / fields[i].size_bytes ||
+        point_step + fields[i].size_bytes * fields[i].count > kMaxPointBytes) {
+      return error("a point of more than 1 MiB (SIZE x COUNT summed over the fields)");
+    }
     point_step += fields[i].size_bytes * fields[i].count;
     values_per_point += fields[i].count;
     for (int a = 0; a < 3; ++a) {

@@ -335,6 +335,40 @@ TEST(PcdTest, BrokenFilesAreClearErrors) {
   std::remove(path.c_str());
 }
 
+// Inputs that crashed the importer once (hostile testing): a header whose DATA line ends the
+// file (heap-buffer-overflow in binary, std::out_of_range in ascii), and a point size that
+// overflowed the size computation (SIGSEGV, binary and compressed).
+TEST(PcdTest, CrashInputsAreCleanErrors) {
+  const std::string path = TempPath("crash.pcd");
+  const std::string header =
+      "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 4\nHEIGHT 1\n"
+      "POINTS 4\n";
+  std::string many_fields = "VERSION 0.7\nFIELDS x y z";
+  std::string sizes = "\nSIZE 4 4 4", types = "\nTYPE F F F", counts = "\nCOUNT 1 1 1";
+  for (int i = 0; i < 40; ++i) {
+    many_fields += " f" + std::to_string(i);
+    sizes += " 1048576";
+    types += " U";
+    counts += " 1048576";
+  }
+  many_fields += sizes + types + counts + "\nWIDTH 16\nHEIGHT 1\nPOINTS 16\n";
+  const std::pair<std::string, std::string> cases[] = {
+      {header + "DATA binary", "needs 48"},
+      {header + "DATA ascii", "ascii data ends after 0 of 4"},
+      {header + "DATA binary_compressed", "lacks its size header"},
+      {many_fields + "DATA binary\n" + std::string(64, '\0'), "more than 1 MiB"},
+      {many_fields + "DATA binary_compressed\n" + std::string(64, '\0'), "more than 1 MiB"},
+  };
+  for (const auto& [bytes, why] : cases) {
+    WriteFile(path, bytes);
+    fusion::v1::RecordedCloud cloud;
+    const Status s = ReadPcd(path, &cloud);
+    ASSERT_FALSE(s.ok()) << why;
+    EXPECT_NE(s.message().find(why), std::string::npos) << s.message();
+  }
+  std::remove(path.c_str());
+}
+
 TEST(PcdTest, RealStereoFrame) {
   const std::string path = kData + "/pcl_stereo/table_scene_mug_stereo_textured.pcd";
   if (!Exists(path)) GTEST_SKIP() << "PCL sample not found at " << path;
