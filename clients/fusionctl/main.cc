@@ -166,6 +166,10 @@ int Stats(Context& ctx, const Args&) {
   }
   std::printf("renders            %llu\n", (unsigned long long)s.renders());
   std::printf("snapshots_saved    %llu\n", (unsigned long long)s.snapshots_saved());
+  std::printf("snapshots_failed   %llu\n", (unsigned long long)s.snapshots_failed());
+  if (!s.last_snapshot_error().empty()) {
+    std::printf("snapshot_error     %s\n", s.last_snapshot_error().c_str());
+  }
   if (!s.last_snapshot_path().empty()) {
     std::printf("last_snapshot      %s\n", s.last_snapshot_path().c_str());
   }

@@ -136,7 +136,10 @@ int main(int argc, char** argv) {
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
   spdlog::info("signal {} received, shutting down", signal_number);
-  server.Shutdown();
+  if (!server.Shutdown()) {
+    spdlog::error("stopped without its final snapshot");
+    return 1;
+  }
   spdlog::info("stopped");
   return 0;
 }

@@ -302,6 +302,8 @@ grpc::ServerUnaryReactor* MapService::GetStats(grpc::CallbackServerContext* cont
     reply->set_resolution_m(snapshot->tree->getResolution());
     reply->set_sensor_memory_bytes(memory);
     reply->set_snapshots_saved(state_->persister->saves());
+    reply->set_snapshots_failed(state_->persister->failures());
+    if (state_->persister->failing()) reply->set_last_snapshot_error(state_->persister->last_error());
     reply->set_last_snapshot_path(state_->persister->path());
     for (std::size_t i = 0; i < kRejectReasonCount; ++i) {
       const auto n = rejected.by_reason[i].load();

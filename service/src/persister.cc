@@ -39,7 +39,17 @@ bool Persister::SaveNow(std::uint64_t* version, std::uint64_t* bytes, std::strin
   const auto start = std::chrono::steady_clock::now();
   if (!WriteSnapshotFile(*snapshot->tree, path_, bytes, error)) {
     spdlog::error("snapshot: {}", *error);
+    failures_.fetch_add(1);
+    {
+      std::lock_guard<std::mutex> error_lock(error_mutex_);
+      last_error_ = *error;
+    }
+    if (!failing_.exchange(true) && on_health_) on_health_(false);
     return false;
+  }
+  if (failing_.exchange(false)) {
+    spdlog::info("snapshot: writes succeed again");
+    if (on_health_) on_health_(true);
   }
   saved_version_ = snapshot->version;
   *version = snapshot->version;
@@ -48,6 +58,11 @@ bool Persister::SaveNow(std::uint64_t* version, std::uint64_t* bytes, std::strin
       "snapshot: version {} written to {} ({} bytes, {:.1f} ms)", snapshot->version, path_, *bytes,
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
   return true;
+}
+
+std::string Persister::last_error() const {
+  std::lock_guard<std::mutex> lock(error_mutex_);
+  return last_error_;
 }
 
 void Persister::Loop() {

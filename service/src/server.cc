@@ -28,7 +28,7 @@ struct FusionServer::Parts {
 
 FusionServer::FusionServer(fusion::v1::ServiceConfig config) : config_(std::move(config)) {}
 
-FusionServer::~FusionServer() { Shutdown(); }
+FusionServer::~FusionServer() { (void)Shutdown(); }
 
 bool FusionServer::Start(std::string* error) {
   parts_ = std::make_unique<Parts>();
@@ -100,6 +100,7 @@ bool FusionServer::Start(std::string* error) {
   p.persister = std::make_unique<Persister>(
       persistence.path(), std::chrono::seconds(persistence.interval_s()), p.hub.get());
   if (loaded) p.persister->set_saved_version(p.hub->Current()->version);
+  p.persister->set_on_health([this](bool ok) { SetHealth(kPersistenceHealth, ok); });
   p.persister->Start();
   p.state.persister = p.persister.get();
 
@@ -127,20 +128,36 @@ bool FusionServer::Start(std::string* error) {
     server_.reset();
     return false;
   }
-  auto* health = server_->GetHealthCheckService();
-  health->SetServingStatus(true);
-  health->SetServingStatus(fusion::v1::FusionMap::service_full_name(), true);
+  {
+    std::lock_guard<std::mutex> lock(health_mutex_);
+    health_ = server_->GetHealthCheckService();
+    health_->SetServingStatus(true);
+    health_->SetServingStatus(fusion::v1::FusionMap::service_full_name(), true);
+    if (p.persister->enabled()) {
+      health_->SetServingStatus(kPersistenceHealth, !p.persister->failing());
+    }
+  }
   spdlog::info("{} sensor(s) configured; map resolution {} m, rule {}", p.state.sensors.size(),
                map_options->resolution_m, config_.map().fusion_rule());
   return true;
 }
 
-void FusionServer::Shutdown(std::chrono::milliseconds deadline) {
-  if (stopped_ || !parts_) return;
+void FusionServer::SetHealth(const std::string& service, bool serving) {
+  std::lock_guard<std::mutex> lock(health_mutex_);
+  if (health_ != nullptr) health_->SetServingStatus(service, serving);
+  if (!serving) spdlog::warn("health: {} NOT_SERVING", service);
+}
+
+bool FusionServer::Shutdown(std::chrono::milliseconds deadline) {
+  if (stopped_ || !parts_) return true;
   stopped_ = true;
   Parts& p = *parts_;
   p.state.shutting_down = true;
-  if (server_) server_->GetHealthCheckService()->SetServingStatus(false);
+  {
+    std::lock_guard<std::mutex> lock(health_mutex_);
+    if (health_ != nullptr) health_->SetServingStatus(false);
+    health_ = nullptr;
+  }
   p.hub->Close();  // ends the update streams
   if (server_) {
     server_->Shutdown(std::chrono::system_clock::now() + deadline);
@@ -148,6 +165,7 @@ void FusionServer::Shutdown(std::chrono::milliseconds deadline) {
   }
   if (p.ingest) p.ingest->Stop();
   if (p.worker) p.worker->Stop();  // drains the queues, renders, publishes
+  bool saved = true;
   if (p.persister) {
     p.persister->Stop();
     if (p.persister->enabled()) {
@@ -155,6 +173,7 @@ void FusionServer::Shutdown(std::chrono::milliseconds deadline) {
       std::string error;
       if (!p.persister->SaveNow(&version, &bytes, &error)) {
         spdlog::error("final snapshot not written: {}", error);
+        saved = false;
       }
     }
   }
@@ -162,6 +181,7 @@ void FusionServer::Shutdown(std::chrono::milliseconds deadline) {
     dds_delete(participant_);
     participant_ = 0;
   }
+  return saved;
 }
 
 }  // namespace fusion::service

@@ -425,6 +425,55 @@ TEST_F(FusiondServiceTest, CorruptSnapshotIsSetAsideAndNotOverwritten) {
   EXPECT_NE(dynamic_cast<octomap::OcTree*>(read.get()), nullptr);
 }
 
+// Persistence failures are visible: counted in GetStats, the health entry
+// fusion.v1.Persistence NOT_SERVING while writes fail (SERVING again once they succeed), and a
+// shutdown that cannot write its final snapshot exits non-zero.
+TEST_F(FusiondServiceTest, SnapshotFailuresShowInStatsHealthAndTheExitCode) {
+  const std::string missing = dir_ + "/missing";
+  {
+    std::ifstream in(config_);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string old_path = "\"" + snapshot_ + "\"";
+    text.replace(text.find(old_path), old_path.size(), "\"" + missing + "/map.ot\"");
+    std::ofstream(config_) << text;
+  }
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  const auto persistence = [&] {
+    auto health = grpc::health::v1::Health::NewStub(channel_);
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    grpc::health::v1::HealthCheckRequest request;
+    request.set_service("fusion.v1.Persistence");
+    grpc::health::v1::HealthCheckResponse reply;
+    EXPECT_TRUE(health->Check(&context, request, &reply).ok());
+    return reply.status();
+  };
+  const auto wait_for = [&](grpc::health::v1::HealthCheckResponse::ServingStatus status) {
+    const auto end = std::chrono::steady_clock::now() + 10s;
+    while (persistence() != status && std::chrono::steady_clock::now() < end) {
+      std::this_thread::sleep_for(100ms);
+    }
+    return persistence() == status;
+  };
+  // The periodic write (every second) fails: its directory does not exist.
+  ASSERT_TRUE(wait_for(grpc::health::v1::HealthCheckResponse::NOT_SERVING));
+  v1::Stats stats = Stats();
+  EXPECT_GE(stats.snapshots_failed(), 1u);
+  EXPECT_NE(stats.last_snapshot_error().find(missing), std::string::npos)
+      << stats.last_snapshot_error();
+  EXPECT_EQ(stats.snapshots_saved(), 0u);
+  // Writes succeed once the directory is there.
+  fs::create_directories(missing);
+  ASSERT_TRUE(wait_for(grpc::health::v1::HealthCheckResponse::SERVING));
+  stats = Stats();
+  EXPECT_GE(stats.snapshots_saved(), 1u);
+  EXPECT_TRUE(stats.last_snapshot_error().empty());
+  // The final snapshot cannot be written: the exit code says so.
+  fs::remove_all(missing);
+  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 1);
+}
+
 grpc::StatusCode QueryPointsStatus(v1::FusionMap::Stub& stub, const v1::QueryPointsRequest& r) {
   grpc::ClientContext context;
   context.set_deadline(In(5s));

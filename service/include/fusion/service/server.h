@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include "fusion/v1/config.pb.h"
@@ -26,8 +27,11 @@ class FusionServer {
   // Port actually bound (useful with port 0).
   [[nodiscard]] int port() const { return port_; }
   // Stops serving (streams end, running calls get the deadline), leaves DDS, integrates what
-  // is queued, writes the final snapshot.
-  void Shutdown(std::chrono::milliseconds deadline = std::chrono::milliseconds(2000));
+  // is queued, writes the final snapshot. False if that snapshot could not be written.
+  bool Shutdown(std::chrono::milliseconds deadline = std::chrono::milliseconds(2000));
+
+  // The health service's entry for snapshot writes (SERVING unless they fail).
+  static constexpr const char* kPersistenceHealth = "fusion.v1.Persistence";
 
  private:
   struct Parts;
@@ -37,6 +41,10 @@ class FusionServer {
   int port_ = 0;
   int participant_ = 0;
   bool stopped_ = false;
+  // The persister's thread reports to the health service while the server lives.
+  std::mutex health_mutex_;
+  grpc::HealthCheckServiceInterface* health_ = nullptr;
+  void SetHealth(const std::string& service, bool serving);
 };
 
 }  // namespace fusion::service
