@@ -124,6 +124,9 @@ bool ValidateLimits(const fusion::v1::QueryLimits& limits, std::string* error) {
                 "must lie in 1..50000 (a page is one gRPC message, at most 4 MB)");
   }
   if (limits.max_box_voxels() == 0) return Fail(error, "limits.max_box_voxels", "must be positive");
+  if (limits.max_update_streams() == 0 || limits.max_update_streams() > 10'000) {
+    return Fail(error, "limits.max_update_streams", "must lie in 1..10000");
+  }
   if (limits.snapshot_chunk_bytes() < 1024 || limits.snapshot_chunk_bytes() > (3u << 20)) {
     return Fail(error, "limits.snapshot_chunk_bytes",
                 "must lie in 1024..3145728 (gRPC's default message limit is 4 MiB)");
@@ -157,6 +160,7 @@ fusion::v1::ServiceConfig DefaultConfig() {
   config.mutable_persistence()->set_interval_s(30);
   auto* limits = config.mutable_limits();
   limits->set_max_points_per_query(100'000);
+  limits->set_max_update_streams(64);
   limits->set_max_voxels_per_page(10'000);
   limits->set_max_box_voxels(100'000'000);
   limits->set_snapshot_chunk_bytes(1 << 20);

@@ -132,6 +132,9 @@ class SnapshotWriter final : public grpc::ServerWriteReactor<fusion::v1::Snapsho
 
 class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate> {
  public:
+  // Pages of one incremental batch a subscriber may hold before it gets a full resend instead.
+  static constexpr std::size_t kMaxBatchPages = 8;
+
   UpdateWriter(ServiceState* state, std::uint64_t since, bool versions_only)
       : state_(state), sent_version_(since), full_next_(since == 0), versions_only_(versions_only) {
     // Subscribed before taking mutex_: the hub calls OnPublish with its subscriber lock held,
@@ -158,6 +161,7 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   }
   void OnDone() override {
     state_->hub->Unsubscribe(subscription_);
+    state_->update_streams.fetch_sub(1);
     delete this;
   }
 
@@ -165,7 +169,7 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   void OnPublish() {
     std::lock_guard<std::mutex> lock(mutex_);
     if (finished_ || cancelled_) return;
-    if (started_ && pending_.empty() && !writing_) {
+    if (started_ && pending_.empty() && !writing_ && !full_it_) {
       PrepareLocked(false);
       WriteNextLocked();
     } else {
@@ -195,31 +199,66 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
       pending_.back().set_from_version(full ? 0 : sent_version_);
       pending_.back().set_full(full);
     };
-    new_message();
     if (full) {
-      for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-        if (pending_.back().voxels_size() >= static_cast<int>(per_message)) new_message();
-        VoxelToProto(tree, it.getKey(), it.getDepth(), &*it, state_->thresholds,
-                     pending_.back().add_voxels());
-      }
-    } else {
-      // What each changed region holds now: its leaves, or the region itself (one value, or
-      // unknown where the map holds nothing any more).
-      for (const MapRegion& region : regions) {
-        ForEachInRegion(tree, region,
-                        [&](const octomap::OcTreeKey& key, unsigned depth,
-                            const octomap::OcTreeNode* node) {
-                          if (pending_.back().voxels_size() >= static_cast<int>(per_message)) {
-                            new_message();
+      // The whole map, one page at a time as the client takes them (NextFullPageLocked): a
+      // subscriber holds one page and the version it reads, never the map as messages.
+      full_snapshot_ = snapshot;
+      full_it_ = tree.begin_leafs();
+      sent_version_ = snapshot->version;
+      full_next_ = false;
+      NextFullPageLocked();
+      return;
+    }
+    new_message();
+    // What each changed region holds now: its leaves, or the region itself (one value, or
+    // unknown where the map holds nothing any more). A change larger than kMaxBatchPages pages
+    // is sent as a full resend instead, page by page, so that no subscriber buffers much.
+    bool too_large = false;
+    for (const MapRegion& region : regions) {
+      ForEachInRegion(tree, region,
+                      [&](const octomap::OcTreeKey& key, unsigned depth,
+                          const octomap::OcTreeNode* node) {
+                        if (too_large) return;
+                        if (pending_.back().voxels_size() >= static_cast<int>(per_message)) {
+                          if (pending_.size() >= kMaxBatchPages) {
+                            too_large = true;
+                            return;
                           }
-                          VoxelToProto(tree, key, depth, node, state_->thresholds,
-                                       pending_.back().add_voxels());
-                        });
-      }
+                          new_message();
+                        }
+                        VoxelToProto(tree, key, depth, node, state_->thresholds,
+                                     pending_.back().add_voxels());
+                      });
+      if (too_large) break;
+    }
+    if (too_large) {
+      pending_.clear();
+      full_next_ = true;
+      PrepareLocked(/*first=*/true);
+      return;
     }
     pending_.back().set_complete(true);
     sent_version_ = snapshot->version;
     full_next_ = false;
+  }
+
+  // The next page of a full resend, the last one `complete`.
+  void NextFullPageLocked() {
+    const octomap::OcTree& tree = *full_snapshot_->tree;
+    const int per_message = static_cast<int>(state_->config.limits().max_voxels_per_page());
+    pending_.emplace_back();
+    fusion::v1::MapUpdate& page = pending_.back();
+    page.set_map_version(full_snapshot_->version);
+    page.set_from_version(0);
+    page.set_full(true);
+    for (auto& it = *full_it_; it != tree.end_leafs() && page.voxels_size() < per_message; ++it) {
+      VoxelToProto(tree, it.getKey(), it.getDepth(), &*it, state_->thresholds, page.add_voxels());
+    }
+    if (*full_it_ == tree.end_leafs()) {
+      page.set_complete(true);
+      full_it_.reset();
+      full_snapshot_.reset();
+    }
   }
 
   void WriteNextLocked() {
@@ -228,11 +267,12 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
       FinishLocked(Status(StatusCode::CANCELLED, "cancelled"));
       return;
     }
+    if (pending_.empty() && full_it_) NextFullPageLocked();
     if (pending_.empty() && (state_->hub->closed() || state_->shutting_down)) {
       FinishLocked(Status::OK);
       return;
     }
-    if (pending_.empty() && more_) {
+    if (pending_.empty() && more_ && !full_it_) {
       more_ = false;
       PrepareLocked(false);
     }
@@ -257,6 +297,9 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   bool versions_only_;
   std::deque<fusion::v1::MapUpdate> pending_;
   fusion::v1::MapUpdate current_;
+  // A full resend in progress: the version it reads and where it stands.
+  std::shared_ptr<const MapSnapshot> full_snapshot_;
+  std::optional<octomap::OcTree::leaf_iterator> full_it_;
   bool started_ = false;  // the first messages are prepared
   bool writing_ = false;
   bool more_ = false;
@@ -639,9 +682,18 @@ grpc::ServerWriteReactor<fusion::v1::MapUpdate>* MapService::StreamUpdates(
     return new ErrorWriter<fusion::v1::MapUpdate>(
         Status(StatusCode::UNAVAILABLE, "fusiond is shutting down"));
   }
+  const std::uint32_t limit = state_->config.limits().max_update_streams();
+  if (state_->update_streams.fetch_add(1) >= limit) {
+    state_->update_streams.fetch_sub(1);
+    return new ErrorWriter<fusion::v1::MapUpdate>(Status(
+        StatusCode::RESOURCE_EXHAUSTED,
+        "StreamUpdates: " + std::to_string(limit) + " update streams are open already "
+        "(limits.max_update_streams)"));
+  }
   try {
     return new UpdateWriter(state_, request->since_version(), request->versions_only());
   } catch (const std::exception& e) {
+    state_->update_streams.fetch_sub(1);
     return new ErrorWriter<fusion::v1::MapUpdate>(
         Status(StatusCode::INTERNAL, std::string("StreamUpdates: ") + e.what()));
   }

@@ -425,6 +425,86 @@ TEST_F(FusiondServiceTest, CorruptSnapshotIsSetAsideAndNotOverwritten) {
   EXPECT_NE(dynamic_cast<octomap::OcTree*>(read.get()), nullptr);
 }
 
+// Update streams are bounded: at most limits.max_update_streams at once (one more gets
+// RESOURCE_EXHAUSTED, a closed one frees its place), and a full resend goes page by page, all of
+// the map's leaves in order, the last page complete.
+TEST_F(FusiondServiceTest, UpdateStreamsAreLimitedAndResendTheMapPageByPage) {
+  {
+    std::ifstream in(config_);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string limits = "limits { ";
+    text.replace(text.find(limits), limits.size(), "limits { max_update_streams: 2 ");
+    const std::string page = "max_voxels_per_page: 50000";
+    text.replace(text.find(page), page.size(), "max_voxels_per_page: 200");
+    std::ofstream(config_) << text;
+  }
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  {
+    TestPublisher publisher(domain_);
+    ASSERT_TRUE(publisher.WaitForReader(10s));
+    ASSERT_GT(MapTheBoard(publisher), 0u);
+  }
+  // Let the last render publish: then the map stays as it is.
+  std::uint64_t version = 0;
+  for (int i = 0; i < 50 && Stats().map_version() != version; ++i) {
+    version = Stats().map_version();
+    std::this_thread::sleep_for(300ms);
+  }
+  const v1::Stats stats = Stats();
+  ASSERT_EQ(stats.map_version(), version);
+  ASSERT_GT(stats.map_leaves(), 1000u);
+
+  grpc::ClientContext first_context;
+  first_context.set_deadline(In(20s));
+  auto first = stub_->StreamUpdates(&first_context, v1::StreamUpdatesRequest());
+  std::uint64_t voxels = 0, pages = 0;
+  v1::MapUpdate update;
+  while (first->Read(&update)) {
+    EXPECT_TRUE(update.full());
+    EXPECT_EQ(update.map_version(), version);
+    EXPECT_LE(update.voxels_size(), 200);
+    voxels += static_cast<std::uint64_t>(update.voxels_size());
+    ++pages;
+    if (update.complete()) break;
+  }
+  ASSERT_TRUE(update.complete());
+  EXPECT_EQ(voxels, stats.map_leaves());
+  EXPECT_GE(pages, stats.map_leaves() / 200);
+
+  grpc::ClientContext second_context;
+  second_context.set_deadline(In(20s));
+  v1::StreamUpdatesRequest versions_only;
+  versions_only.set_versions_only(true);
+  auto second = stub_->StreamUpdates(&second_context, versions_only);
+  ASSERT_TRUE(second->Read(&update));
+  {
+    grpc::ClientContext third_context;
+    third_context.set_deadline(In(5s));
+    auto third = stub_->StreamUpdates(&third_context, versions_only);
+    EXPECT_FALSE(third->Read(&update));
+    const grpc::Status status = third->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+  }
+  first_context.TryCancel();
+  (void)first->Finish();
+  // The cancelled stream's place is free again (the server learns of it asynchronously).
+  bool reopened = false;
+  for (int i = 0; i < 50 && !reopened; ++i) {
+    grpc::ClientContext context;
+    context.set_deadline(In(5s));
+    auto again = stub_->StreamUpdates(&context, versions_only);
+    reopened = again->Read(&update);
+    context.TryCancel();
+    (void)again->Finish();
+    if (!reopened) std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_TRUE(reopened);
+  second_context.TryCancel();
+  (void)second->Finish();
+  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+}
+
 // Persistence failures are visible: counted in GetStats, the health entry
 // fusion.v1.Persistence NOT_SERVING while writes fail (SERVING again once they succeed), and a
 // shutdown that cannot write its final snapshot exits non-zero.

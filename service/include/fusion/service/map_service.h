@@ -27,6 +27,7 @@ struct ServiceState {
   Persister* persister = nullptr;
   std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
   std::atomic<bool> shutting_down{false};
+  std::atomic<std::uint32_t> update_streams{0};  // open StreamUpdates subscriptions
 };
 
 class MapService final : public fusion::v1::FusionMap::CallbackService {
