@@ -72,84 +72,141 @@ Plane CanonicalPlane(const Eigen::Vector3d& normal, double distance_m) {
   return plane;
 }
 
-std::vector<Plane> DetectPlanes(const octomap::OcTree& tree, const HoughOptions& options) {
+namespace {
+
+// Polls options.stop about every kPollWork steps of work.
+class Poller {
+ public:
+  explicit Poller(const std::function<bool()>& stop) : stop_(stop) {}
+  bool Tick(std::size_t work) {
+    if (stopped_) return true;
+    work_ += work;
+    if (work_ >= kPollWork) {
+      work_ = 0;
+      stopped_ = stop_ && stop_();
+    }
+    return stopped_;
+  }
+  [[nodiscard]] bool stopped() const { return stopped_; }
+
+ private:
+  static constexpr std::size_t kPollWork = std::size_t{1} << 20;
+  const std::function<bool()>& stop_;
+  std::size_t work_ = 0;
+  bool stopped_ = false;
+};
+
+// The leaves that vote, weighted by occupancy and by the voxels a pruned leaf stands for.
+std::vector<WeightedPoint> CollectVoters(const octomap::OcTree& tree, const HoughOptions& options,
+                                         Poller* poller, double* max_norm) {
   const double res = tree.getResolution();
-  const double band = options.support_distance_m > 0.0 ? options.support_distance_m : 1.5 * res;
   std::vector<WeightedPoint> points;
-  double max_norm = 0.0;
+  *max_norm = 0.0;
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    if (poller->Tick(16)) break;
     const double p = it->getOccupancy();
     if (p <= options.min_probability) continue;
     const Eigen::Vector3d c(it.getX(), it.getY(), it.getZ());
     if (options.region && !options.region->contains(c)) continue;
-    // A pruned leaf stands for all voxels under it: weight by their count.
     const double size_ratio = it.getSize() / res;
-    const double w = p * size_ratio * size_ratio * size_ratio;
-    points.push_back({c, w, false});
-    max_norm = std::max(max_norm, c.norm());
+    points.push_back({c, p * size_ratio * size_ratio * size_ratio, false});
+    *max_norm = std::max(*max_norm, c.norm());
   }
-  if (points.empty()) return {};
+  return points;
+}
 
-  const int n_phi = std::max(1, static_cast<int>(std::ceil(2.0 * kPi / options.phi_bin_rad)));
-  const int n_theta = std::max(1, static_cast<int>(std::ceil(kPi / options.theta_bin_rad)));
-  const double phi_bin = 2.0 * kPi / n_phi;
-  const double theta_bin = kPi / n_theta;
-  const int n_d = static_cast<int>(std::floor(max_norm / options.d_bin_m)) + 2;
-  const std::size_t n_normals = static_cast<std::size_t>(n_phi) * n_theta;
-  std::vector<Eigen::Vector3f> normals(n_normals);
-  for (int t = 0; t < n_theta; ++t) {
-    for (int f = 0; f < n_phi; ++f) {
-      normals[static_cast<std::size_t>(t) * n_phi + f] =
-          NormalFromAngles(-kPi + (f + 0.5) * phi_bin, (t + 0.5) * theta_bin).cast<float>();
+// Votes: cells[normal][d]. Each voxel votes once per normal with d = n . p >= 0 (the opposite
+// normal takes d < 0).
+struct Accumulator {
+  int n_phi = 1, n_theta = 1, n_d = 1;
+  double d_bin_m = 1.0;
+  std::vector<Eigen::Vector3f> normals;
+  std::vector<float> cells;
+
+  Accumulator(const HoughOptions& options, double max_norm_m)
+      : n_phi(std::max(1, static_cast<int>(std::ceil(2.0 * kPi / options.phi_bin_rad)))),
+        n_theta(std::max(1, static_cast<int>(std::ceil(kPi / options.theta_bin_rad)))),
+        n_d(static_cast<int>(std::floor(max_norm_m / options.d_bin_m)) + 2),
+        d_bin_m(options.d_bin_m) {}
+  [[nodiscard]] std::size_t n_normals() const { return std::size_t(n_phi) * std::size_t(n_theta); }
+  // Cells to allocate: the votes and the normals (three floats each).
+  [[nodiscard]] std::size_t needed_cells() const { return n_normals() * (std::size_t(n_d) + 3); }
+  void Allocate() {
+    const double phi_bin = 2.0 * kPi / n_phi, theta_bin = kPi / n_theta;
+    normals.resize(n_normals());
+    for (int t = 0; t < n_theta; ++t) {
+      for (int f = 0; f < n_phi; ++f) {
+        normals[std::size_t(t) * n_phi + f] =
+            NormalFromAngles(-kPi + (f + 0.5) * phi_bin, (t + 0.5) * theta_bin).cast<float>();
+      }
     }
+    cells.assign(n_normals() * std::size_t(n_d), 0.0f);
   }
-  // Votes: accumulator[normal][d]. Each voxel votes once per normal with d = n
-  // . p >= 0 (the opposite normal takes d < 0).
-  std::vector<float> acc(n_normals * static_cast<std::size_t>(n_d), 0.0f);
-  const float inv_d_bin = static_cast<float>(1.0 / options.d_bin_m);
+  [[nodiscard]] float at(std::size_t k, int b) const { return cells[k * n_d + b]; }
+};
+
+void Vote(const std::vector<WeightedPoint>& points, Accumulator* acc, Poller* poller) {
+  const float inv_d_bin = static_cast<float>(1.0 / acc->d_bin_m);
+  const std::size_t n_normals = acc->n_normals();
   for (const auto& wp : points) {
+    if (poller->Tick(n_normals)) return;
     const Eigen::Vector3f p = wp.p.cast<float>();
     const auto w = static_cast<float>(wp.w);
     for (std::size_t k = 0; k < n_normals; ++k) {
-      const float d = normals[k].dot(p);
+      const float d = acc->normals[k].dot(p);
       if (d < 0.0f) continue;
-      const auto bin = static_cast<std::size_t>(d * inv_d_bin);
-      acc[k * n_d + bin] += w;
+      acc->cells[k * acc->n_d + static_cast<std::size_t>(d * inv_d_bin)] += w;
     }
   }
+}
 
-  // Local maxima over the 3 x 3 x 3 neighbourhood (phi wraps around).
-  std::vector<Peak> peaks;
-  for (int t = 0; t < n_theta; ++t) {
-    for (int f = 0; f < n_phi; ++f) {
-      const std::size_t k = static_cast<std::size_t>(t) * n_phi + f;
-      for (int b = 0; b < n_d; ++b) {
-        const float v = acc[k * n_d + b];
-        if (v <= 0.0f) continue;
-        bool is_max = true;
-        for (int dt = -1; dt <= 1 && is_max; ++dt) {
-          const int tt = t + dt;
-          if (tt < 0 || tt >= n_theta) continue;
-          for (int df = -1; df <= 1 && is_max; ++df) {
-            const int ff = (f + df + n_phi) % n_phi;
-            const std::size_t kk = static_cast<std::size_t>(tt) * n_phi + ff;
-            for (int db = -1; db <= 1; ++db) {
-              const int bb = b + db;
-              if (bb < 0 || bb >= n_d || (dt == 0 && df == 0 && db == 0)) continue;
-              if (acc[kk * n_d + bb] > v) {
-                is_max = false;
-                break;
-              }
-            }
-          }
-        }
-        if (is_max) peaks.push_back({v, normals[k].cast<double>(), (b + 0.5) * options.d_bin_m});
+// Whether cell (t, f, b) is a maximum of its 3 x 3 x 3 neighbourhood (phi wraps around).
+bool IsLocalMax(const Accumulator& acc, int t, int f, int b, float v) {
+  for (int dt = -1; dt <= 1; ++dt) {
+    const int tt = t + dt;
+    if (tt < 0 || tt >= acc.n_theta) continue;
+    for (int df = -1; df <= 1; ++df) {
+      const std::size_t kk = std::size_t(tt) * acc.n_phi + (f + df + acc.n_phi) % acc.n_phi;
+      for (int db = -1; db <= 1; ++db) {
+        const int bb = b + db;
+        if (bb < 0 || bb >= acc.n_d || (dt == 0 && df == 0 && db == 0)) continue;
+        if (acc.at(kk, bb) > v) return false;
       }
     }
   }
-  std::sort(peaks.begin(), peaks.end(),
-            [](const Peak& a, const Peak& b) { return a.votes > b.votes; });
+  return true;
+}
 
+// The strongest local maxima, strongest first; at most kMaxPeaks are kept.
+std::vector<Peak> FindPeaks(const Accumulator& acc, Poller* poller) {
+  constexpr std::size_t kMaxPeaks = 16384;
+  const auto stronger = [](const Peak& a, const Peak& b) { return a.votes > b.votes; };
+  std::vector<Peak> peaks;
+  const auto trim = [&] {
+    if (peaks.size() <= kMaxPeaks) return;
+    std::nth_element(peaks.begin(), peaks.begin() + kMaxPeaks, peaks.end(), stronger);
+    peaks.resize(kMaxPeaks);
+  };
+  for (int t = 0; t < acc.n_theta; ++t) {
+    for (int f = 0; f < acc.n_phi; ++f) {
+      if (poller->Tick(std::size_t(acc.n_d))) return {};
+      const std::size_t k = std::size_t(t) * acc.n_phi + f;
+      for (int b = 0; b < acc.n_d; ++b) {
+        const float v = acc.at(k, b);
+        if (v <= 0.0f || !IsLocalMax(acc, t, f, b, v)) continue;
+        peaks.push_back({v, acc.normals[k].cast<double>(), (b + 0.5) * acc.d_bin_m});
+        if (peaks.size() >= 2 * kMaxPeaks) trim();
+      }
+    }
+  }
+  trim();
+  std::sort(peaks.begin(), peaks.end(), stronger);
+  return peaks;
+}
+
+// Peaks refined into planes, strongest first, each claiming its supporting voxels.
+std::vector<Plane> ExtractPlanes(const std::vector<Peak>& peaks, std::vector<WeightedPoint>* points,
+                                 const HoughOptions& options, double band, Poller* poller) {
   const double cos_nms = std::cos(options.nms_angle_rad);
   auto near = [&](const Eigen::Vector3d& n1, double d1, const Eigen::Vector3d& n2, double d2) {
     return (n1.dot(n2) > cos_nms && std::abs(d1 - d2) < options.nms_distance_m) ||
@@ -158,7 +215,7 @@ std::vector<Plane> DetectPlanes(const octomap::OcTree& tree, const HoughOptions&
   std::vector<Plane> planes;
   std::vector<Peak> accepted;
   for (const Peak& peak : peaks) {
-    if (planes.size() >= options.max_planes) break;
+    if (planes.size() >= options.max_planes || poller->Tick(points->size() * 8)) break;
     bool suppressed = false;
     for (const Peak& a : accepted) suppressed |= near(peak.normal, peak.d, a.normal, a.d);
     for (const Plane& a : planes) suppressed |= near(peak.normal, peak.d, a.normal, a.distance_m);
@@ -166,14 +223,13 @@ std::vector<Plane> DetectPlanes(const octomap::OcTree& tree, const HoughOptions&
     accepted.push_back(peak);
     Eigen::Vector3d n = peak.normal;
     double d = peak.d;
-    if (!Refine(points, band, options.refine_iterations, &n, &d)) continue;
+    if (!Refine(*points, band, options.refine_iterations, &n, &d)) continue;
     Plane plane = CanonicalPlane(n, d);
     plane.extent.setEmpty();
     double sq = 0.0;
-    // Support: voxels near the plane not explained by a stronger plane. Without
-    // this, planes cutting obliquely through a strong plane's voxels would be
-    // reported as well.
-    for (const auto& wp : points) {
+    // Support: voxels near the plane not explained by a stronger plane. Without this, planes
+    // cutting obliquely through a strong plane's voxels would be reported as well.
+    for (const auto& wp : *points) {
       const double r = plane.normal.dot(wp.p) - plane.distance_m;
       if (wp.claimed || std::abs(r) > band) continue;
       ++plane.support_voxels;
@@ -188,7 +244,7 @@ std::vector<Plane> DetectPlanes(const octomap::OcTree& tree, const HoughOptions&
       duplicate |= near(plane.normal, plane.distance_m, a.normal, a.distance_m);
     }
     if (duplicate) continue;
-    for (auto& wp : points) {
+    for (auto& wp : *points) {
       if (std::abs(plane.normal.dot(wp.p) - plane.distance_m) <= band) wp.claimed = true;
     }
     planes.push_back(plane);
@@ -196,6 +252,43 @@ std::vector<Plane> DetectPlanes(const octomap::OcTree& tree, const HoughOptions&
   std::sort(planes.begin(), planes.end(),
             [](const Plane& a, const Plane& b) { return a.votes > b.votes; });
   return planes;
+}
+
+}  // namespace
+
+PlaneSearch SearchPlanes(const octomap::OcTree& tree, const HoughOptions& options) {
+  PlaneSearch search;
+  Poller poller(options.stop);
+  const auto stopped = [&] {
+    search.status = PlaneSearchStatus::kStopped;
+    search.planes.clear();
+    return search;
+  };
+  double max_norm_m = 0.0;
+  std::vector<WeightedPoint> points = CollectVoters(tree, options, &poller, &max_norm_m);
+  if (poller.stopped()) return stopped();
+  search.voters = points.size();
+  if (points.empty()) return search;
+  Accumulator acc(options, max_norm_m);
+  search.accumulator_cells = acc.needed_cells();
+  if (options.max_accumulator_cells > 0 && search.accumulator_cells > options.max_accumulator_cells) {
+    search.status = PlaneSearchStatus::kTooLarge;
+    return search;
+  }
+  acc.Allocate();
+  Vote(points, &acc, &poller);
+  if (poller.stopped()) return stopped();
+  const std::vector<Peak> peaks = FindPeaks(acc, &poller);
+  if (poller.stopped()) return stopped();
+  const double band = options.support_distance_m > 0.0 ? options.support_distance_m
+                                                        : 1.5 * tree.getResolution();
+  search.planes = ExtractPlanes(peaks, &points, options, band, &poller);
+  if (poller.stopped()) return stopped();
+  return search;
+}
+
+std::vector<Plane> DetectPlanes(const octomap::OcTree& tree, const HoughOptions& options) {
+  return SearchPlanes(tree, options).planes;
 }
 
 }  // namespace fusion

@@ -127,6 +127,15 @@ bool ValidateLimits(const fusion::v1::QueryLimits& limits, std::string* error) {
   if (limits.max_update_streams() == 0 || limits.max_update_streams() > 10'000) {
     return Fail(error, "limits.max_update_streams", "must lie in 1..10000");
   }
+  if (limits.max_plane_cells() < 100'000 || limits.max_plane_cells() > 10'000'000'000ull) {
+    return Fail(error, "limits.max_plane_cells", "must lie in 100000..10000000000");
+  }
+  if (limits.max_heavy_queries() == 0 || limits.max_heavy_queries() > 1000) {
+    return Fail(error, "limits.max_heavy_queries", "must lie in 1..1000");
+  }
+  if (limits.query_thread_nice() == 0 || limits.query_thread_nice() > 19) {
+    return Fail(error, "limits.query_thread_nice", "must lie in 1..19");
+  }
   if (limits.snapshot_chunk_bytes() < 1024 || limits.snapshot_chunk_bytes() > (3u << 20)) {
     return Fail(error, "limits.snapshot_chunk_bytes",
                 "must lie in 1024..3145728 (gRPC's default message limit is 4 MiB)");
@@ -161,6 +170,9 @@ fusion::v1::ServiceConfig DefaultConfig() {
   auto* limits = config.mutable_limits();
   limits->set_max_points_per_query(100'000);
   limits->set_max_update_streams(64);
+  limits->set_max_plane_cells(32'000'000);
+  limits->set_max_heavy_queries(4);
+  limits->set_query_thread_nice(10);
   limits->set_max_voxels_per_page(10'000);
   limits->set_max_box_voxels(100'000'000);
   limits->set_snapshot_chunk_bytes(1 << 20);

@@ -27,6 +27,7 @@ constexpr std::size_t kDeadlineCheckEvery = 4096;
 template <typename Body>
 grpc::ServerUnaryReactor* Unary(grpc::CallbackServerContext* context, const ServiceState* state,
                                 const char* name, Body&& body) {
+  LowerThreadPriorityOnce(static_cast<int>(state->config.limits().query_thread_nice()));
   auto* reactor = context->DefaultReactor();
   Status status;
   if (state->shutting_down) {
@@ -48,6 +49,24 @@ grpc::ServerUnaryReactor* Unary(grpc::CallbackServerContext* context, const Serv
 
 bool Expired(const grpc::CallbackServerContext* context) {
   return context->IsCancelled() || context->deadline() < std::chrono::system_clock::now();
+}
+
+// Admission of an expensive call (docs/service.md, "Overload"): OK with *slot held, or the
+// status that sheds it.
+Status AdmitHeavy(ServiceState* state, const char* name, std::optional<CountedSlot>* slot) {
+  const auto& limits = state->config.limits();
+  if (state->pressure.Behind(*state->queues, std::chrono::steady_clock::now())) {
+    return Status(StatusCode::UNAVAILABLE,
+                  std::string(name) + ": fusiond is dropping clouds; expensive queries are shed "
+                                      "until ingest keeps up (retry in a second)");
+  }
+  *slot = CountedSlot::Take(&state->heavy_queries, limits.max_heavy_queries());
+  if (!*slot) {
+    return Status(StatusCode::RESOURCE_EXHAUSTED,
+                  std::string(name) + ": " + std::to_string(limits.max_heavy_queries()) +
+                      " expensive queries are running already (limits.max_heavy_queries)");
+  }
+  return Status::OK;
 }
 
 Status DeadlineExceeded(const char* what) {
@@ -95,8 +114,10 @@ bool KeyLess(const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
 
 class SnapshotWriter final : public grpc::ServerWriteReactor<fusion::v1::SnapshotChunk> {
  public:
-  SnapshotWriter(std::string data, std::uint64_t version, std::size_t chunk_bytes)
-      : data_(std::move(data)), version_(version), chunk_bytes_(chunk_bytes) {
+  SnapshotWriter(std::string data, std::uint64_t version, std::size_t chunk_bytes,
+                 CountedSlot slot)
+      : data_(std::move(data)), version_(version), chunk_bytes_(chunk_bytes),
+        slot_(std::move(slot)) {
     WriteNext();
   }
   void OnWriteDone(bool ok) override {
@@ -128,6 +149,7 @@ class SnapshotWriter final : public grpc::ServerWriteReactor<fusion::v1::Snapsho
   std::size_t chunk_bytes_;
   std::size_t offset_ = 0;
   fusion::v1::SnapshotChunk chunk_;
+  CountedSlot slot_;  // one of limits.max_heavy_queries while the map is sent
 };
 
 class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate> {
@@ -135,8 +157,12 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   // Pages of one incremental batch a subscriber may hold before it gets a full resend instead.
   static constexpr std::size_t kMaxBatchPages = 8;
 
-  UpdateWriter(ServiceState* state, std::uint64_t since, bool versions_only)
-      : state_(state), sent_version_(since), full_next_(since == 0), versions_only_(versions_only) {
+  UpdateWriter(ServiceState* state, std::uint64_t since, bool versions_only, CountedSlot slot)
+      : state_(state),
+        slot_(std::move(slot)),
+        sent_version_(since),
+        full_next_(since == 0),
+        versions_only_(versions_only) {
     // Subscribed before taking mutex_: the hub calls OnPublish with its subscriber lock held,
     // and OnPublish takes mutex_ (one lock order). A publish in between waits for started_.
     subscription_ = state_->hub->Subscribe([this] { OnPublish(); });
@@ -161,7 +187,6 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   }
   void OnDone() override {
     state_->hub->Unsubscribe(subscription_);
-    state_->update_streams.fetch_sub(1);
     delete this;
   }
 
@@ -290,6 +315,7 @@ class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate
   }
 
   ServiceState* state_;
+  CountedSlot slot_;  // one of limits.max_update_streams
   std::mutex mutex_;
   int subscription_ = 0;
   std::uint64_t sent_version_;
@@ -420,6 +446,8 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
     if (has_token && !DecodeToken(request->page_token(), &after)) {
       return Status(StatusCode::INVALID_ARGUMENT, "page_token is malformed");
     }
+    std::optional<CountedSlot> slot;
+    if (Status admitted = AdmitHeavy(state_, "QueryBox", &slot); !admitted.ok()) return admitted;
     const auto snapshot = state_->hub->Current();
     const octomap::OcTree& tree = *snapshot->tree;
     octomap::OcTreeKey kmin, kmax;
@@ -440,7 +468,9 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
       unsigned depth;
       const octomap::OcTreeNode* node;
     };
+    const auto less = [](const Found& a, const Found& b) { return KeyLess(a.key, b.key); };
     std::vector<Found> found;
+    found.reserve(std::min<std::size_t>(page + 1, 1 << 16));
     std::size_t visited = 0;
     if (states.count(fusion::v1::VOXEL_STATE_UNKNOWN) != 0) {
       // Unknown voxels have no node: walk every key of the box in order, after the token.
@@ -449,10 +479,10 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
         for (unsigned y = kmin[1]; y <= kmax[1] && found.size() <= page; ++y) {
           for (unsigned z = kmin[2]; z <= kmax[2] && found.size() <= page; ++z) {
             k = octomap::OcTreeKey(x, y, z);
-            if (has_token && !KeyLess(after, k)) continue;
             if (++visited % kDeadlineCheckEvery == 0 && Expired(context)) {
               return DeadlineExceeded("QueryBox");
             }
+            if (has_token && !KeyLess(after, k)) continue;
             const octomap::OcTreeNode* node = tree.search(k);
             if (states.count(StateOfNode(node, state_->thresholds)) != 0) {
               found.push_back({k, tree.getTreeDepth(), node});
@@ -469,12 +499,16 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
         const octomap::OcTreeKey k = it.getKey();
         if (has_token && !KeyLess(after, k)) continue;
         if (states.count(StateOfNode(&*it, state_->thresholds)) == 0) continue;
+        // The page + 1 smallest keys, in a max-heap: memory is one page whatever the box holds.
+        if (found.size() == page + 1 && !KeyLess(k, found.front().key)) continue;
         found.push_back({k, it.getDepth(), &*it});
+        std::push_heap(found.begin(), found.end(), less);
+        if (found.size() > page + 1) {
+          std::pop_heap(found.begin(), found.end(), less);
+          found.pop_back();
+        }
       }
-      const auto less = [](const Found& a, const Found& b) { return KeyLess(a.key, b.key); };
-      const std::size_t keep = std::min<std::size_t>(found.size(), page + 1);
-      std::partial_sort(found.begin(), found.begin() + keep, found.end(), less);
-      found.resize(keep);
+      std::sort_heap(found.begin(), found.end(), less);
     }
     const bool more = found.size() > page;
     if (more) found.resize(page);
@@ -547,13 +581,27 @@ grpc::ServerUnaryReactor* MapService::FindPlanes(grpc::CallbackServerContext* co
         (request->distance_step_m() > 0.0 && request->distance_step_m() < 0.001)) {
       return Status(StatusCode::INVALID_ARGUMENT, "distance_step_m must lie in [0.001, 10]");
     }
+    std::optional<CountedSlot> slot;
+    if (Status admitted = AdmitHeavy(state_, "FindPlanes", &slot); !admitted.ok()) return admitted;
     const auto snapshot = state_->hub->Current();
     reply->set_map_version(snapshot->version);
-    const auto options = HoughOptionsFromProto(*request, snapshot->tree->getResolution());
-    for (const Plane& plane : DetectPlanes(*snapshot->tree, options)) {
-      PlaneToProto(plane, reply->add_planes());
+    auto options = HoughOptionsFromProto(*request, snapshot->tree->getResolution());
+    options.max_accumulator_cells = state_->config.limits().max_plane_cells();
+    options.stop = [this, context] { return Expired(context) || state_->shutting_down; };
+    const PlaneSearch search = SearchPlanes(*snapshot->tree, options);
+    if (search.status == PlaneSearchStatus::kTooLarge) {
+      return Status(StatusCode::RESOURCE_EXHAUSTED,
+                    "FindPlanes: the search needs " + std::to_string(search.accumulator_cells) +
+                        " accumulator cells for " + std::to_string(search.voters) +
+                        " voting voxels; limits.max_plane_cells is " +
+                        std::to_string(options.max_accumulator_cells) +
+                        " (coarser angle_step_deg / distance_step_m, or a region, need fewer)");
     }
-    if (Expired(context)) return DeadlineExceeded("FindPlanes");
+    if (search.status == PlaneSearchStatus::kStopped) {
+      if (state_->shutting_down) return Status(StatusCode::UNAVAILABLE, "fusiond is shutting down");
+      return DeadlineExceeded("FindPlanes");
+    }
+    for (const Plane& plane : search.planes) PlaneToProto(plane, reply->add_planes());
     return Status::OK;
   });
 }
@@ -664,12 +712,17 @@ grpc::ServerWriteReactor<fusion::v1::SnapshotChunk>* MapService::GetSnapshot(
       return new ErrorWriter<fusion::v1::SnapshotChunk>(
           Status(StatusCode::INVALID_ARGUMENT, "format: unknown value"));
     }
+    LowerThreadPriorityOnce(static_cast<int>(state_->config.limits().query_thread_nice()));
+    std::optional<CountedSlot> slot;
+    if (Status admitted = AdmitHeavy(state_, "GetSnapshot", &slot); !admitted.ok()) {
+      return new ErrorWriter<fusion::v1::SnapshotChunk>(admitted);
+    }
     const auto snapshot = state_->hub->Current();
     std::string data = request->format() == fusion::v1::GetSnapshotRequest::FORMAT_BT
                            ? SerializeBt(*snapshot->tree)
                            : SerializeOt(*snapshot->tree);
     return new SnapshotWriter(std::move(data), snapshot->version,
-                              state_->config.limits().snapshot_chunk_bytes());
+                              state_->config.limits().snapshot_chunk_bytes(), std::move(*slot));
   } catch (const std::exception& e) {
     return new ErrorWriter<fusion::v1::SnapshotChunk>(
         Status(StatusCode::INTERNAL, std::string("GetSnapshot: ") + e.what()));
@@ -682,18 +735,19 @@ grpc::ServerWriteReactor<fusion::v1::MapUpdate>* MapService::StreamUpdates(
     return new ErrorWriter<fusion::v1::MapUpdate>(
         Status(StatusCode::UNAVAILABLE, "fusiond is shutting down"));
   }
+  LowerThreadPriorityOnce(static_cast<int>(state_->config.limits().query_thread_nice()));
   const std::uint32_t limit = state_->config.limits().max_update_streams();
-  if (state_->update_streams.fetch_add(1) >= limit) {
-    state_->update_streams.fetch_sub(1);
+  std::optional<CountedSlot> slot = CountedSlot::Take(&state_->update_streams, limit);
+  if (!slot) {
     return new ErrorWriter<fusion::v1::MapUpdate>(Status(
         StatusCode::RESOURCE_EXHAUSTED,
         "StreamUpdates: " + std::to_string(limit) + " update streams are open already "
         "(limits.max_update_streams)"));
   }
   try {
-    return new UpdateWriter(state_, request->since_version(), request->versions_only());
+    return new UpdateWriter(state_, request->since_version(), request->versions_only(),
+                            std::move(*slot));
   } catch (const std::exception& e) {
-    state_->update_streams.fetch_sub(1);
     return new ErrorWriter<fusion::v1::MapUpdate>(
         Status(StatusCode::INTERNAL, std::string("StreamUpdates: ") + e.what()));
   }

@@ -80,6 +80,51 @@ TEST(Planes, TiltedPlaneAndRegion) {
   EXPECT_NEAR(planes[0].distance_m, 2.0, 0.015);
 }
 
+octomap::OcTree BoardTree() {
+  octomap::OcTree tree(kRes);
+  AddPlanePatch(&tree, {1.75, 0.0, 0.2}, Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(), 0.6,
+                0.5, 2.0f);
+  tree.updateInnerOccupancy();
+  return tree;
+}
+
+TEST(Planes, AnAccumulatorOverTheBoundIsRefusedBeforeItIsBuilt) {
+  const octomap::OcTree tree = BoardTree();
+  HoughOptions options;
+  const PlaneSearch free_search = SearchPlanes(tree, options);
+  ASSERT_EQ(free_search.status, PlaneSearchStatus::kOk);
+  ASSERT_FALSE(free_search.planes.empty());
+  EXPECT_GT(free_search.voters, 2500u);
+  // 180 x 90 normals; the board is within 2 m: (floor(max |p| / 2 cm) + 2 + 3) cells per normal.
+  EXPECT_GE(free_search.accumulator_cells, 180u * 90u * (87u + 5u));
+  options.max_accumulator_cells = free_search.accumulator_cells;
+  EXPECT_EQ(SearchPlanes(tree, options).status, PlaneSearchStatus::kOk);
+  options.max_accumulator_cells = free_search.accumulator_cells - 1;
+  const PlaneSearch refused = SearchPlanes(tree, options);
+  EXPECT_EQ(refused.status, PlaneSearchStatus::kTooLarge);
+  EXPECT_TRUE(refused.planes.empty());
+  EXPECT_EQ(refused.accumulator_cells, free_search.accumulator_cells);
+}
+
+TEST(Planes, AStopRequestEndsTheSearchInEveryPhase) {
+  const octomap::OcTree tree = BoardTree();
+  HoughOptions options;
+  int polls = 0;
+  options.stop = [&polls] { return ++polls > 1000000; };
+  ASSERT_EQ(SearchPlanes(tree, options).status, PlaneSearchStatus::kOk);
+  const int polls_in_full_search = polls;
+  ASSERT_GT(polls_in_full_search, 10);
+  // Stopping at each poll of the full search ends it there: nothing found, status kStopped.
+  for (int stop_at : {1, polls_in_full_search / 3, polls_in_full_search - 1}) {
+    polls = 0;
+    options.stop = [&polls, stop_at] { return ++polls >= stop_at; };
+    const PlaneSearch search = SearchPlanes(tree, options);
+    EXPECT_EQ(search.status, PlaneSearchStatus::kStopped) << stop_at;
+    EXPECT_TRUE(search.planes.empty());
+    EXPECT_EQ(polls, stop_at) << "the search went on after being told to stop";
+  }
+}
+
 TEST(Planes, EmptyTreeGivesNoPlanes) {
   octomap::OcTree tree(kRes);
   EXPECT_TRUE(DetectPlanes(tree).empty());

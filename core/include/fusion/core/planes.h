@@ -14,6 +14,7 @@
 
 #include <Eigen/Geometry>
 #include <cstddef>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -41,6 +42,12 @@ struct HoughOptions {
   // = 1.5 voxels.
   double support_distance_m = 0.0;
   int refine_iterations = 3;
+  // Work bounds. A search whose accumulator (normals x distance bins, plus the normals
+  // themselves) would exceed this many cells is refused before it allocates (0 = no bound).
+  std::size_t max_accumulator_cells = 0;
+  // Polled about every million steps of each loop; the search ends (kStopped) once it
+  // returns true. Unset: never stops early.
+  std::function<bool()> stop;
 };
 
 struct Plane {
@@ -58,7 +65,19 @@ struct Plane {
 [[nodiscard]] Eigen::Vector3d NormalFromAngles(double phi_rad, double theta_rad);
 // Puts (n, d) in canonical form (d >= 0) and fills phi/theta.
 [[nodiscard]] Plane CanonicalPlane(const Eigen::Vector3d& normal, double distance_m);
-// Planes sorted by votes, strongest first.
+enum class PlaneSearchStatus { kOk, kTooLarge, kStopped };
+
+struct PlaneSearch {
+  PlaneSearchStatus status = PlaneSearchStatus::kOk;
+  std::vector<Plane> planes;          // sorted by votes, strongest first (kOk only)
+  std::size_t voters = 0;             // leaves that voted
+  std::size_t accumulator_cells = 0;  // what the search needs (checked against the bound)
+};
+
+// The Hough search within the options' bounds.
+[[nodiscard]] PlaneSearch SearchPlanes(const octomap::OcTree& tree,
+                                       const HoughOptions& options = {});
+// Planes sorted by votes, strongest first (SearchPlanes without bounds' outcome).
 [[nodiscard]] std::vector<Plane> DetectPlanes(const octomap::OcTree& tree,
                                               const HoughOptions& options = {});
 

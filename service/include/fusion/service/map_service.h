@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 
+#include "fusion/service/admission.h"
 #include "fusion/service/conversions.h"
 #include "fusion/service/fusion_worker.h"
 #include "fusion/service/ingest_queues.h"
@@ -28,6 +29,8 @@ struct ServiceState {
   std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
   std::atomic<bool> shutting_down{false};
   std::atomic<std::uint32_t> update_streams{0};  // open StreamUpdates subscriptions
+  std::atomic<std::uint32_t> heavy_queries{0};   // FindPlanes, QueryBox, GetSnapshot running
+  IngestPressure pressure;
 };
 
 class MapService final : public fusion::v1::FusionMap::CallbackService {
