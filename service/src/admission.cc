@@ -36,13 +36,45 @@ bool IngestPressure::Behind(const IngestQueues& queues, std::chrono::steady_cloc
   return dropped_recently_ && now - last_drop_ < kWindow;
 }
 
-void LowerThreadPriorityOnce(int nice) {
-  thread_local bool done = false;
-  if (done) return;
-  done = true;
-  // Linux: the nice value of one thread (PRIO_PROCESS with a thread id).
+QueryPool::QueryPool(std::size_t threads, int nice) {
+  for (std::size_t i = 0; i < threads; ++i) threads_.emplace_back([this, nice] { Run(nice); });
+}
+
+QueryPool::~QueryPool() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  cv_.notify_all();
+  for (auto& t : threads_) t.join();
+}
+
+void QueryPool::Post(std::function<void()> task) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    tasks_.push_back(std::move(task));
+  }
+  cv_.notify_one();
+}
+
+void QueryPool::Run(int nice) {
+  (void)SetThreadNice(nice);
+  for (;;) {
+    std::function<void()> task;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      cv_.wait(lock, [this] { return stopping_ || !tasks_.empty(); });
+      if (tasks_.empty()) return;  // stopping, and nothing left to run
+      task = std::move(tasks_.front());
+      tasks_.pop_front();
+    }
+    task();
+  }
+}
+
+bool SetThreadNice(int nice) {
   const auto tid = static_cast<id_t>(::syscall(SYS_gettid));
-  (void)::setpriority(PRIO_PROCESS, tid, nice);
+  return ::setpriority(PRIO_PROCESS, tid, nice) == 0;
 }
 
 }  // namespace fusion::service

@@ -110,6 +110,9 @@ bool ValidateIngest(const fusion::v1::IngestConfig& ingest, std::string* error) 
   if (!(ingest.max_abs_translation_m() > 0.0 && std::isfinite(ingest.max_abs_translation_m()))) {
     return Fail(error, "ingest.max_abs_translation_m", "must be positive and finite");
   }
+  if (ingest.max_queued_mb() < 16 || ingest.max_queued_mb() > 65536) {
+    return Fail(error, "ingest.max_queued_mb", "must lie in 16..65536");
+  }
   return true;
 }
 
@@ -130,11 +133,12 @@ bool ValidateLimits(const fusion::v1::QueryLimits& limits, std::string* error) {
   if (limits.max_plane_cells() < 100'000 || limits.max_plane_cells() > 10'000'000'000ull) {
     return Fail(error, "limits.max_plane_cells", "must lie in 100000..10000000000");
   }
-  if (limits.max_heavy_queries() == 0 || limits.max_heavy_queries() > 1000) {
-    return Fail(error, "limits.max_heavy_queries", "must lie in 1..1000");
+  if (limits.max_heavy_queries() == 0 || limits.max_heavy_queries() > 64) {
+    return Fail(error, "limits.max_heavy_queries", "must lie in 1..64");
   }
-  if (limits.query_thread_nice() == 0 || limits.query_thread_nice() > 19) {
-    return Fail(error, "limits.query_thread_nice", "must lie in 1..19");
+  if (limits.heavy_query_nice() < 11 || limits.heavy_query_nice() > 19) {
+    return Fail(error, "limits.heavy_query_nice",
+                "must lie in 11..19 (above the fusion worker's nice value, 10)");
   }
   if (limits.snapshot_chunk_bytes() < 1024 || limits.snapshot_chunk_bytes() > (3u << 20)) {
     return Fail(error, "limits.snapshot_chunk_bytes",
@@ -166,13 +170,14 @@ fusion::v1::ServiceConfig DefaultConfig() {
   ingest->set_max_points(4'000'000);
   ingest->set_quaternion_tolerance(1e-3);
   ingest->set_max_abs_translation_m(1e5);
+  ingest->set_max_queued_mb(256);
   config.mutable_persistence()->set_interval_s(30);
   auto* limits = config.mutable_limits();
   limits->set_max_points_per_query(100'000);
   limits->set_max_update_streams(64);
   limits->set_max_plane_cells(32'000'000);
   limits->set_max_heavy_queries(4);
-  limits->set_query_thread_nice(10);
+  limits->set_heavy_query_nice(19);
   limits->set_max_voxels_per_page(10'000);
   limits->set_max_box_voxels(100'000'000);
   limits->set_snapshot_chunk_bytes(1 << 20);

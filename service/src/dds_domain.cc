@@ -12,7 +12,10 @@ const char* const kLoopbackDdsConfig =
     R"(<Discovery><ParticipantIndex>auto</ParticipantIndex>)"
     R"(<MaxAutoParticipantIndex>50</MaxAutoParticipantIndex>)"
     R"(<Peers><Peer address="127.0.0.1"/></Peers></Discovery>)"
-    R"(<Internal><SocketReceiveBufferSize min="4MB"/></Internal>)"
+    R"(<Internal><SocketReceiveBufferSize min="4MB"/>)"
+    // Samples reassembled at once from fragments: each can be a multi-megabyte cloud.
+    R"(<DefragReliableMaxSamples>4</DefragReliableMaxSamples>)"
+    R"(<DefragUnreliableMaxSamples>2</DefragUnreliableMaxSamples></Internal>)"
     R"(</Domain></CycloneDDS>)";
 
 dds_entity_t CreateParticipant(std::uint32_t domain_id, std::string* error) {

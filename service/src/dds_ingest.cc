@@ -2,14 +2,22 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+
 #include "fusion/service/conversions.h"
 
 namespace fusion::service {
 namespace {
 
 constexpr int kMaxSamplesPerTake = 16;
-// Samples a reliable reader holds before DDS flow control holds the writers back.
-constexpr int32_t kReliableReaderSamples = 64;
+
+// Samples a reliable reader holds before DDS flow control holds the writers back: as many
+// clouds of max_points as fit the queues' byte bound, 2..64.
+int32_t ReliableReaderSamples(const DdsIngestOptions& options) {
+  const std::size_t cloud_bytes = std::size_t{options.limits.max_points} * 13;  // xyz + flag
+  const std::size_t fit = options.max_queued_bytes / std::max<std::size_t>(cloud_bytes, 1);
+  return static_cast<int32_t>(std::clamp<std::size_t>(fit, 8, 64));
+}
 
 std::string DdsError(const char* call, dds_return_t rc) {
   return std::string(call) + ": " + dds_strretcode(rc);
@@ -29,6 +37,11 @@ bool DdsIngest::Start(dds_entity_t participant, std::string* error) {
     *error = DdsError("dds_create_topic", topic_);
     return false;
   }
+  if (const dds_return_t rc = dds_set_topic_filter_and_arg(topic_, &DdsIngest::AcceptSensor, this);
+      rc != DDS_RETCODE_OK) {
+    *error = DdsError("dds_set_topic_filter_and_arg", rc);
+    return false;
+  }
   dds_qos_t* qos = dds_create_qos();
   if (options_.reliable) {
     dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
@@ -39,7 +52,7 @@ bool DdsIngest::Start(dds_entity_t participant, std::string* error) {
     // Lossless: keep every sample; while the queues are full the ingest thread waits, the
     // reader's cache fills up to its limit and DDS flow control holds the writer back.
     dds_qset_history(qos, DDS_HISTORY_KEEP_ALL, 0);
-    dds_qset_resource_limits(qos, kReliableReaderSamples, DDS_LENGTH_UNLIMITED,
+    dds_qset_resource_limits(qos, ReliableReaderSamples(options_), DDS_LENGTH_UNLIMITED,
                              DDS_LENGTH_UNLIMITED);
   } else {
     // Keyed by sensor_id: keep the newest cloud of every sensor (the bounded queues behind
@@ -117,6 +130,19 @@ void DdsIngest::Loop() {
   }
 }
 
+bool DdsIngest::AcceptSensor(const void* sample, void* self) {
+  auto* ingest = static_cast<DdsIngest*>(self);
+  const char* id = static_cast<const fusion_dds_PointCloud*>(sample)->sensor_id;
+  std::string detail;
+  const auto reason = ValidateSensorId(
+      id, [ingest](const std::string& s) { return ingest->queues_->Known(s); }, &detail);
+  if (!reason) return true;
+  const std::string sensor_id = id != nullptr ? id : "";
+  ingest->queues_->CountRejected(sensor_id, *reason);
+  ingest->LogRejection(*reason, sensor_id, detail);
+  return false;
+}
+
 void DdsIngest::Handle(const fusion_dds_PointCloud& sample) {
   std::string detail;
   const auto reason = ValidateSample(
@@ -136,6 +162,7 @@ void DdsIngest::LogRejection(RejectReason reason, const std::string& sensor_id,
                              const std::string& detail) {
   const auto i = static_cast<std::size_t>(reason);
   const auto now = std::chrono::steady_clock::now();
+  std::lock_guard<std::mutex> lock(log_mutex_);
   if (now - last_log_[i] < options_.log_interval) {
     ++suppressed_[i];
     return;

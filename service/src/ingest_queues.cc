@@ -8,7 +8,9 @@ std::uint64_t RejectCounters::Total() const {
   return total;
 }
 
-IngestQueues::IngestQueues(const std::vector<std::pair<std::string, std::size_t>>& sensors) {
+IngestQueues::IngestQueues(const std::vector<std::pair<std::string, std::size_t>>& sensors,
+                           std::size_t max_queued_bytes)
+    : max_queued_bytes_(max_queued_bytes) {
   for (const auto& [id, depth] : sensors) {
     auto slot = std::make_unique<Slot>();
     slot->depth = depth < 1 ? 1 : depth;
@@ -41,16 +43,28 @@ void IngestQueues::CountRejected(const std::string& sensor_id, RejectReason reas
   if (auto* c = counters(sensor_id)) c->rejected.Count(reason);
 }
 
+std::size_t IngestQueues::BytesOf(const Cloud& cloud) {
+  return cloud.xyz.size() * sizeof(float) + cloud.beyond_range.size();
+}
+
+bool IngestQueues::FullLocked(const Slot& slot, std::size_t bytes) const {
+  if (slot.queue.size() >= slot.depth) return true;
+  return max_queued_bytes_ > 0 && !slot.queue.empty() &&
+         queued_bytes_ + bytes > max_queued_bytes_;
+}
+
 bool IngestQueues::Push(Cloud cloud, const std::atomic<bool>* stop) {
   const auto it = slots_.find(cloud.sensor_id);
   if (it == slots_.end()) return false;  // callers validate first
   Slot& slot = *it->second;
+  const std::size_t bytes = BytesOf(cloud);
   {
     std::unique_lock<std::mutex> lock(mutex_);
     slot.counters.received.fetch_add(1, std::memory_order_relaxed);
     slot.counters.last_sequence_number.store(cloud.sequence_number, std::memory_order_relaxed);
-    while (slot.queue.size() >= slot.depth) {
+    while (FullLocked(slot, bytes)) {
       if (stop == nullptr) {  // newest wins
+        queued_bytes_ -= BytesOf(slot.queue.front());
         slot.queue.pop_front();
         slot.counters.dropped.fetch_add(1, std::memory_order_relaxed);
       } else if (stop->load()) {  // shutting down: give up on this cloud
@@ -60,6 +74,7 @@ bool IngestQueues::Push(Cloud cloud, const std::atomic<bool>* stop) {
         space_cv_.wait_for(lock, std::chrono::milliseconds(100));
       }
     }
+    queued_bytes_ += bytes;
     slot.queue.push_back(std::move(cloud));
   }
   cv_.notify_one();
@@ -81,6 +96,7 @@ bool IngestQueues::PopAll(std::vector<Cloud>* out, std::chrono::steady_clock::ti
     for (auto& cloud : entry.second->queue) out->push_back(std::move(cloud));
     entry.second->queue.clear();
   }
+  queued_bytes_ = 0;
   lock.unlock();
   space_cv_.notify_all();
   return !out->empty();
@@ -99,6 +115,11 @@ std::size_t IngestQueues::Pending() const {
   std::size_t n = 0;
   for (const auto& entry : slots_) n += entry.second->queue.size();
   return n;
+}
+
+std::size_t IngestQueues::queued_bytes() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return queued_bytes_;
 }
 
 }  // namespace fusion::service

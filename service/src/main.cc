@@ -1,4 +1,6 @@
 // fusiond: the forward-model occupancy fusion service.
+#include <malloc.h>
+
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
@@ -58,6 +60,10 @@ bool ParseUnsigned(const char* text, unsigned long* value) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Clouds are megabytes: allocations of 1 MiB and more are mapped and unmapped on their own,
+  // so memory freed after a burst returns to the system (glibc would otherwise raise this
+  // threshold after the first free and keep freed clouds in its arenas).
+  mallopt(M_MMAP_THRESHOLD, 1 << 20);
   auto config = fusion::service::DefaultConfig();
   std::string error;
   // The config file first, so flags override it wherever they stand.

@@ -23,12 +23,9 @@ constexpr double kMaxRayRangeM = 1000.0;
 constexpr std::uint32_t kMaxPlanes = 64;
 constexpr std::size_t kDeadlineCheckEvery = 4096;
 
-// Runs a handler body; no exception escapes, every outcome finishes the call once.
+// Runs a handler body: no exception escapes, every outcome is a status.
 template <typename Body>
-grpc::ServerUnaryReactor* Unary(grpc::CallbackServerContext* context, const ServiceState* state,
-                                const char* name, Body&& body) {
-  LowerThreadPriorityOnce(static_cast<int>(state->config.limits().query_thread_nice()));
-  auto* reactor = context->DefaultReactor();
+Status RunBody(const ServiceState* state, const char* name, Body& body) {
   Status status;
   if (state->shutting_down) {
     status = Status(StatusCode::UNAVAILABLE, "fusiond is shutting down");
@@ -43,12 +40,50 @@ grpc::ServerUnaryReactor* Unary(grpc::CallbackServerContext* context, const Serv
     }
   }
   if (!status.ok()) spdlog::debug("{}: {} {}", name, status.error_code(), status.error_message());
-  reactor->Finish(status);
+  return status;
+}
+
+// A cheap call: answered on gRPC's thread, finished once.
+template <typename Body>
+grpc::ServerUnaryReactor* Unary(grpc::CallbackServerContext* context, const ServiceState* state,
+                                const char* name, Body&& body) {
+  auto* reactor = context->DefaultReactor();
+  reactor->Finish(RunBody(state, name, body));
+  return reactor;
+}
+
+Status AdmitHeavy(ServiceState* state, const char* name, std::optional<CountedSlot>* slot);
+
+// An expensive call: admitted (AdmitHeavy), then run on the low-priority query pool. The body
+// must capture by value what it uses (the request and reply live until Finish).
+template <typename Body>
+grpc::ServerUnaryReactor* Heavy(grpc::CallbackServerContext* context, ServiceState* state,
+                                const char* name, Body body) {
+  auto* reactor = context->DefaultReactor();
+  std::optional<CountedSlot> slot;
+  Status admitted = state->shutting_down
+                        ? Status(StatusCode::UNAVAILABLE, "fusiond is shutting down")
+                        : AdmitHeavy(state, name, &slot);
+  if (!admitted.ok()) {
+    reactor->Finish(admitted);
+    return reactor;
+  }
+  auto held = std::make_shared<std::optional<CountedSlot>>(std::move(slot));
+  state->heavy_pool->Post([reactor, state, name, body, held]() mutable {
+    Status status = RunBody(state, name, body);
+    held->reset();  // free before the client hears back: its next call finds the slot
+    reactor->Finish(status);
+  });
   return reactor;
 }
 
 bool Expired(const grpc::CallbackServerContext* context) {
   return context->IsCancelled() || context->deadline() < std::chrono::system_clock::now();
+}
+
+// Expired, or fusiond shutting down: what an expensive call's loops poll.
+bool Stopped(const grpc::CallbackServerContext* context, const ServiceState* state) {
+  return state->shutting_down || Expired(context);
 }
 
 // Admission of an expensive call (docs/service.md, "Overload"): OK with *slot held, or the
@@ -114,11 +149,23 @@ bool KeyLess(const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
 
 class SnapshotWriter final : public grpc::ServerWriteReactor<fusion::v1::SnapshotChunk> {
  public:
-  SnapshotWriter(std::string data, std::uint64_t version, std::size_t chunk_bytes,
+  // Serializes the current map on the query pool, then streams it in chunks. The slot (one of
+  // limits.max_heavy_queries) is held until the stream ends: one copy of the map per slot.
+  SnapshotWriter(ServiceState* state, fusion::v1::GetSnapshotRequest::Format format,
                  CountedSlot slot)
-      : data_(std::move(data)), version_(version), chunk_bytes_(chunk_bytes),
-        slot_(std::move(slot)) {
-    WriteNext();
+      : chunk_bytes_(state->config.limits().snapshot_chunk_bytes()), slot_(std::move(slot)) {
+    state->heavy_pool->Post([this, state, format] {
+      try {
+        const auto snapshot = state->hub->Current();
+        data_ = format == fusion::v1::GetSnapshotRequest::FORMAT_BT ? SerializeBt(*snapshot->tree)
+                                                                    : SerializeOt(*snapshot->tree);
+        version_ = snapshot->version;
+      } catch (const std::exception& e) {
+        Finish(Status(StatusCode::INTERNAL, std::string("GetSnapshot: ") + e.what()));
+        return;
+      }
+      WriteNext();
+    });
   }
   void OnWriteDone(bool ok) override {
     if (!ok) {
@@ -144,12 +191,12 @@ class SnapshotWriter final : public grpc::ServerWriteReactor<fusion::v1::Snapsho
     StartWrite(&chunk_);
   }
 
-  std::string data_;
-  std::uint64_t version_;
   std::size_t chunk_bytes_;
+  CountedSlot slot_;
+  std::string data_;
+  std::uint64_t version_ = 0;
   std::size_t offset_ = 0;
   fusion::v1::SnapshotChunk chunk_;
-  CountedSlot slot_;  // one of limits.max_heavy_queries while the map is sent
 };
 
 class UpdateWriter final : public grpc::ServerWriteReactor<fusion::v1::MapUpdate> {
@@ -418,7 +465,7 @@ grpc::ServerUnaryReactor* MapService::QueryPoints(grpc::CallbackServerContext* c
 grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* context,
                                                const fusion::v1::QueryBoxRequest* request,
                                                fusion::v1::QueryBoxResponse* reply) {
-  return Unary(context, state_, "QueryBox", [&]() -> Status {
+  return Heavy(context, state_, "QueryBox", [this, context, request, reply]() -> Status {
     const auto& limits = state_->config.limits();
     if (!FinitePoint(request->min()) || !FinitePoint(request->max())) {
       return Status(StatusCode::INVALID_ARGUMENT, "min and max must be finite");
@@ -446,8 +493,6 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
     if (has_token && !DecodeToken(request->page_token(), &after)) {
       return Status(StatusCode::INVALID_ARGUMENT, "page_token is malformed");
     }
-    std::optional<CountedSlot> slot;
-    if (Status admitted = AdmitHeavy(state_, "QueryBox", &slot); !admitted.ok()) return admitted;
     const auto snapshot = state_->hub->Current();
     const octomap::OcTree& tree = *snapshot->tree;
     octomap::OcTreeKey kmin, kmax;
@@ -479,7 +524,7 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
         for (unsigned y = kmin[1]; y <= kmax[1] && found.size() <= page; ++y) {
           for (unsigned z = kmin[2]; z <= kmax[2] && found.size() <= page; ++z) {
             k = octomap::OcTreeKey(x, y, z);
-            if (++visited % kDeadlineCheckEvery == 0 && Expired(context)) {
+            if (++visited % kDeadlineCheckEvery == 0 && Stopped(context, state_)) {
               return DeadlineExceeded("QueryBox");
             }
             if (has_token && !KeyLess(after, k)) continue;
@@ -493,7 +538,7 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
     } else {
       for (auto it = tree.begin_leafs_bbx(kmin, kmax), end = tree.end_leafs_bbx(); it != end;
            ++it) {
-        if (++visited % kDeadlineCheckEvery == 0 && Expired(context)) {
+        if (++visited % kDeadlineCheckEvery == 0 && Stopped(context, state_)) {
           return DeadlineExceeded("QueryBox");
         }
         const octomap::OcTreeKey k = it.getKey();
@@ -558,7 +603,7 @@ grpc::ServerUnaryReactor* MapService::CastRay(grpc::CallbackServerContext* conte
 grpc::ServerUnaryReactor* MapService::FindPlanes(grpc::CallbackServerContext* context,
                                                  const fusion::v1::FindPlanesRequest* request,
                                                  fusion::v1::FindPlanesResponse* reply) {
-  return Unary(context, state_, "FindPlanes", [&]() -> Status {
+  return Heavy(context, state_, "FindPlanes", [this, context, request, reply]() -> Status {
     if (request->has_region_min() != request->has_region_max()) {
       return Status(StatusCode::INVALID_ARGUMENT, "give both region_min and region_max or none");
     }
@@ -581,13 +626,11 @@ grpc::ServerUnaryReactor* MapService::FindPlanes(grpc::CallbackServerContext* co
         (request->distance_step_m() > 0.0 && request->distance_step_m() < 0.001)) {
       return Status(StatusCode::INVALID_ARGUMENT, "distance_step_m must lie in [0.001, 10]");
     }
-    std::optional<CountedSlot> slot;
-    if (Status admitted = AdmitHeavy(state_, "FindPlanes", &slot); !admitted.ok()) return admitted;
     const auto snapshot = state_->hub->Current();
     reply->set_map_version(snapshot->version);
     auto options = HoughOptionsFromProto(*request, snapshot->tree->getResolution());
     options.max_accumulator_cells = state_->config.limits().max_plane_cells();
-    options.stop = [this, context] { return Expired(context) || state_->shutting_down; };
+    options.stop = [this, context] { return Stopped(context, state_); };
     const PlaneSearch search = SearchPlanes(*snapshot->tree, options);
     if (search.status == PlaneSearchStatus::kTooLarge) {
       return Status(StatusCode::RESOURCE_EXHAUSTED,
@@ -712,17 +755,11 @@ grpc::ServerWriteReactor<fusion::v1::SnapshotChunk>* MapService::GetSnapshot(
       return new ErrorWriter<fusion::v1::SnapshotChunk>(
           Status(StatusCode::INVALID_ARGUMENT, "format: unknown value"));
     }
-    LowerThreadPriorityOnce(static_cast<int>(state_->config.limits().query_thread_nice()));
     std::optional<CountedSlot> slot;
     if (Status admitted = AdmitHeavy(state_, "GetSnapshot", &slot); !admitted.ok()) {
       return new ErrorWriter<fusion::v1::SnapshotChunk>(admitted);
     }
-    const auto snapshot = state_->hub->Current();
-    std::string data = request->format() == fusion::v1::GetSnapshotRequest::FORMAT_BT
-                           ? SerializeBt(*snapshot->tree)
-                           : SerializeOt(*snapshot->tree);
-    return new SnapshotWriter(std::move(data), snapshot->version,
-                              state_->config.limits().snapshot_chunk_bytes(), std::move(*slot));
+    return new SnapshotWriter(state_, request->format(), std::move(*slot));
   } catch (const std::exception& e) {
     return new ErrorWriter<fusion::v1::SnapshotChunk>(
         Status(StatusCode::INTERNAL, std::string("GetSnapshot: ") + e.what()));
@@ -735,7 +772,6 @@ grpc::ServerWriteReactor<fusion::v1::MapUpdate>* MapService::StreamUpdates(
     return new ErrorWriter<fusion::v1::MapUpdate>(
         Status(StatusCode::UNAVAILABLE, "fusiond is shutting down"));
   }
-  LowerThreadPriorityOnce(static_cast<int>(state_->config.limits().query_thread_nice()));
   const std::uint32_t limit = state_->config.limits().max_update_streams();
   std::optional<CountedSlot> slot = CountedSlot::Take(&state_->update_streams, limit);
   if (!slot) {

@@ -23,6 +23,7 @@ struct FusionServer::Parts {
   std::unique_ptr<FusionWorker> worker;
   std::unique_ptr<Persister> persister;
   std::unique_ptr<DdsIngest> ingest;
+  std::unique_ptr<QueryPool> heavy_pool;
   std::unique_ptr<MapService> service;
 };
 
@@ -52,7 +53,8 @@ bool FusionServer::Start(std::string* error) {
     return false;
   }
   p.state.thresholds = ThresholdsFromConfig(config_.map());
-  p.queues = std::make_unique<IngestQueues>(queue_specs);
+  p.queues = std::make_unique<IngestQueues>(
+      queue_specs, std::size_t{config_.ingest().max_queued_mb()} << 20);
   p.state.queues = p.queues.get();
   // Queries before the first render see an empty map at the configured resolution.
   p.hub = std::make_unique<SnapshotHub>(SnapshotHub::kDefaultMaxLoggedRegions,
@@ -113,11 +115,15 @@ bool FusionServer::Start(std::string* error) {
   ingest_options.limits.quaternion_tolerance = config_.ingest().quaternion_tolerance();
   ingest_options.limits.max_abs_translation_m = config_.ingest().max_abs_translation_m();
   ingest_options.limits.map_resolution_m = config_.map().resolution_m();
+  ingest_options.max_queued_bytes = std::size_t{config_.ingest().max_queued_mb()} << 20;
   p.ingest = std::make_unique<DdsIngest>(p.queues.get(), ingest_options);
   if (!p.ingest->Start(participant_, error)) return false;
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  p.heavy_pool = std::make_unique<QueryPool>(config_.limits().max_heavy_queries(),
+                                             static_cast<int>(config_.limits().heavy_query_nice()));
+  p.state.heavy_pool = p.heavy_pool.get();
   p.service = std::make_unique<MapService>(&p.state);
   grpc::ServerBuilder builder;
   builder.AddListeningPort(config_.listen_address(), grpc::InsecureServerCredentials(), &port_);
@@ -161,6 +167,7 @@ bool FusionServer::Shutdown(std::chrono::milliseconds deadline) {
   p.hub->Close();  // ends the update streams
   if (server_) {
     server_->Shutdown(std::chrono::system_clock::now() + deadline);
+    p.heavy_pool.reset();  // its calls poll shutting_down; none may finish after the server
     server_.reset();
   }
   if (p.ingest) p.ingest->Stop();

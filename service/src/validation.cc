@@ -55,18 +55,25 @@ std::string LoggableText(std::string_view text, std::size_t max_bytes) {
   return out;
 }
 
-std::optional<RejectReason> ValidateSample(
-    const fusion_dds_PointCloud& sample, const IngestLimits& limits,
-    const std::function<bool(const std::string&)>& is_known_sensor, std::string* detail) {
-  if (sample.sensor_id == nullptr || sample.sensor_id[0] == '\0') {
+std::optional<RejectReason> ValidateSensorId(
+    const char* sensor_id, const std::function<bool(const std::string&)>& is_known_sensor,
+    std::string* detail) {
+  if (sensor_id == nullptr || sensor_id[0] == '\0') {
     *detail = "empty sensor_id";
     return RejectReason::kEmptySensorId;
   }
-  const std::string id = sample.sensor_id;
+  const std::string id = sensor_id;
   if (!is_known_sensor(id)) {
     *detail = "sensor '" + LoggableText(id) + "' is not configured";
     return RejectReason::kUnknownSensor;
   }
+  return std::nullopt;
+}
+
+std::optional<RejectReason> ValidateSample(
+    const fusion_dds_PointCloud& sample, const IngestLimits& limits,
+    const std::function<bool(const std::string&)>& is_known_sensor, std::string* detail) {
+  if (auto reason = ValidateSensorId(sample.sensor_id, is_known_sensor, detail)) return reason;
   // 64-bit products: width * height of two uint32 cannot overflow.
   const std::uint64_t points = std::uint64_t{sample.width} * sample.height;
   if (points == 0 || points > limits.max_points) {

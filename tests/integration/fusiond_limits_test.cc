@@ -149,14 +149,14 @@ TEST_F(FusiondLimitsTest, ExpensiveRequestsAreRefusedOrEndWithTheirDeadline) {
   EXPECT_NE(shed.error_message().find("limits.max_heavy_queries"), std::string::npos);
   // The server ends the cancelled search within a poll of the deadline, then frees the slot.
   grpc::Status again = FindPlanes(45.0, 1.0, In(5s));
-  for (int i = 0; i < 20 && !again.ok(); ++i) {
+  for (int i = 0; i < 200 && !again.ok(); ++i) {
     std::this_thread::sleep_for(10ms);
     again = FindPlanes(45.0, 1.0, In(5s));
   }
   EXPECT_TRUE(again.ok()) << "the slot is not free again: " << again.error_message();
-  // The threads that answered run at limits.query_thread_nice (10); the process itself at 0.
-  EXPECT_EQ(NiceValues(fusiond->pid()).count(10), 1u);
-  EXPECT_EQ(NiceValues(fusiond->pid()).count(0), 1u);
+  // The expensive calls run at limits.heavy_query_nice (19), the fusion worker at 10, gRPC's
+  // and DDS's threads at 0.
+  EXPECT_EQ(NiceValues(fusiond->pid()), (std::set<int>{0, 10, 19}));
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
 }
 

@@ -5,7 +5,6 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
-#include <thread>
 
 namespace fusion::service {
 namespace {
@@ -54,21 +53,22 @@ int NiceOfThisThread() {
   return getpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)));
 }
 
-TEST(AdmissionTest, QueryThreadsRunAtTheirNiceValueOnce) {
-  int first = 0, second = 0, other = 0;
+TEST(AdmissionTest, ThePoolRunsEveryTaskOnItsOwnLowPriorityThreads) {
   const int base = NiceOfThisThread();
-  std::thread query([&] {
-    LowerThreadPriorityOnce(base + 5);
-    first = NiceOfThisThread();
-    LowerThreadPriorityOnce(base + 9);  // once per thread: no further change
-    second = NiceOfThisThread();
-  });
-  query.join();
-  std::thread([&] { other = NiceOfThisThread(); }).join();
-  EXPECT_EQ(first, std::min(base + 5, 19));
-  EXPECT_EQ(second, first);
-  EXPECT_EQ(other, base) << "only the calling thread";
-  EXPECT_EQ(NiceOfThisThread(), base);
+  std::atomic<int> ran{0};
+  std::atomic<int> wrong_nice{0};
+  {
+    QueryPool pool(2, base + 7);
+    for (int i = 0; i < 50; ++i) {
+      pool.Post([&] {
+        if (NiceOfThisThread() != std::min(base + 7, 19)) ++wrong_nice;
+        ++ran;
+      });
+    }
+  }  // the destructor runs what is queued, then joins
+  EXPECT_EQ(ran, 50);
+  EXPECT_EQ(wrong_nice, 0);
+  EXPECT_EQ(NiceOfThisThread(), base) << "only the pool's threads";
 }
 
 }  // namespace

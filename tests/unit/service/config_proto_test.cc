@@ -102,6 +102,11 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
       {"ingest { quaternion_tolerance: 0.9 }", "ingest.quaternion_tolerance"},
       {"limits { snapshot_chunk_bytes: 100000000 }", "limits.snapshot_chunk_bytes"},
       {"limits { max_voxels_per_page: 50001 }", "limits.max_voxels_per_page"},
+      {"limits { max_update_streams: 10001 }", "limits.max_update_streams"},
+      {"limits { max_plane_cells: 1000 }", "limits.max_plane_cells"},
+      {"limits { max_heavy_queries: 65 }", "limits.max_heavy_queries"},
+      {"limits { heavy_query_nice: 5 }", "limits.heavy_query_nice"},
+      {"ingest { max_queued_mb: 8 }", "ingest.max_queued_mb"},
   };
   for (const auto& [text, field] : cases) {
     auto config = DefaultConfig();

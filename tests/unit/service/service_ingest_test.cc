@@ -284,5 +284,53 @@ TEST(ServiceIngestTest, HubLogsChangesAndForgetsTheOldest) {
   EXPECT_TRUE(hub.closed());
 }
 
+Cloud CloudOfBytes(const std::string& id, std::uint64_t seq, std::size_t points) {
+  Cloud c = MakeCloud(id, seq);
+  c.xyz.resize(3 * points);
+  return c;
+}
+
+TEST(ServiceIngestTest, QueuesAreBoundedInBytesAcrossSensors) {
+  // 12 kB clouds (1000 points); 30 kB for all queues together, depth 16 each.
+  IngestQueues queues({{"a", 16}, {"b", 16}}, 30'000);
+  for (std::uint64_t seq = 1; seq <= 5; ++seq) queues.Push(CloudOfBytes("a", seq, 1000));
+  EXPECT_EQ(queues.Pending(), 2u) << "best effort: the oldest dropped to stay within the bytes";
+  EXPECT_EQ(queues.counters("a")->dropped, 3u);
+  EXPECT_EQ(queues.queued_bytes(), 24'000u);
+  // A sensor with an empty queue may always queue one cloud, even over the bound.
+  EXPECT_TRUE(queues.Push(CloudOfBytes("b", 1, 1000)));
+  EXPECT_EQ(queues.queued_bytes(), 36'000u);
+  EXPECT_EQ(queues.counters("b")->dropped, 0u);
+  std::vector<Cloud> out;
+  ASSERT_TRUE(queues.PopAll(&out, std::chrono::steady_clock::now()));
+  EXPECT_EQ(out.size(), 3u);
+  EXPECT_EQ(queues.queued_bytes(), 0u);
+}
+
+TEST(ServiceIngestTest, ReliableQueuesWaitForBytesToFree) {
+  IngestQueues queues({{"a", 16}}, 30'000);
+  std::atomic<bool> stop{false};
+  std::atomic<int> pushed{0};
+  std::thread producer([&] {
+    for (std::uint64_t seq = 1; seq <= 6; ++seq) {
+      EXPECT_TRUE(queues.Push(CloudOfBytes("a", seq, 1000), &stop));
+      ++pushed;
+    }
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_EQ(pushed, 2) << "the third cloud would exceed 30 kB: Push waits";
+  std::vector<Cloud> out;
+  std::uint64_t taken = 0;
+  while (taken < 6) {
+    out.clear();
+    if (queues.PopAll(&out, std::chrono::steady_clock::now() + std::chrono::seconds(2))) {
+      for (const Cloud& c : out) EXPECT_EQ(c.sequence_number, ++taken);  // none lost, in order
+    }
+    EXPECT_LE(queues.queued_bytes(), 30'000u);
+  }
+  producer.join();
+  EXPECT_EQ(queues.counters("a")->dropped, 0u);
+}
+
 }  // namespace
 }  // namespace fusion::service

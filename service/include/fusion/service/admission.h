@@ -1,14 +1,19 @@
 // Admission of queries under load (docs/service.md, "Overload"): a bounded number of
-// expensive calls at once, none while ingest is dropping clouds, and query threads at a lower
-// priority than the fusion worker. Clouds are never shed for queries; queries are shed first.
+// expensive calls at once, none while ingest is dropping clouds, run on threads of a lower
+// priority than the fusion worker's. Clouds are never shed for queries; queries are shed first.
 #pragma once
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <functional>
 #include <cstdint>
 #include <mutex>
 #include <optional>
+#include <thread>
 #include <utility>
+#include <vector>
 
 #include "fusion/service/ingest_queues.h"
 
@@ -50,7 +55,28 @@ class IngestPressure {
   bool dropped_recently_ = false;
 };
 
-// Sets the calling thread's nice value once (later calls on the same thread do nothing).
-void LowerThreadPriorityOnce(int nice);
+// Threads that run the expensive queries at nice `nice` (above the fusion worker's), so that
+// however many there are they cannot take the worker's CPU. Admission (CountedSlot) bounds
+// what is posted; the destructor runs what is queued, then joins.
+class QueryPool {
+ public:
+  QueryPool(std::size_t threads, int nice);
+  ~QueryPool();
+  QueryPool(const QueryPool&) = delete;
+  QueryPool& operator=(const QueryPool&) = delete;
+  void Post(std::function<void()> task);
+
+ private:
+  void Run(int nice);
+
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<std::function<void()>> tasks_;
+  bool stopping_ = false;
+  std::vector<std::thread> threads_;
+};
+
+// Sets the calling thread's nice value (Linux keeps one per thread); false if refused.
+bool SetThreadNice(int nice);
 
 }  // namespace fusion::service

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <mutex>
 #include <string>
 #include <thread>
 
@@ -18,6 +19,9 @@ struct DdsIngestOptions {
   std::string topic = "fusion/points";
   bool reliable = false;  // default: best effort (sensor data)
   IngestLimits limits;
+  // The queues' byte bound (IngestQueues): a reliable reader holds as many samples of
+  // limits.max_points as fit it (2..64), so DDS holds writers back before memory grows.
+  std::size_t max_queued_bytes = 256u << 20;
   // At most one log line per rejection reason per this interval (the rest are counted).
   std::chrono::milliseconds log_interval{1000};
 };
@@ -36,6 +40,9 @@ class DdsIngest {
 
  private:
   void Loop();
+  // The topic filter: false (counted, logged) for a sample whose sensor id is empty or not
+  // configured, before the reader keeps an instance for it. Runs on DDS's receive threads.
+  static bool AcceptSensor(const void* sample, void* self);
   void Handle(const fusion_dds_PointCloud& sample);
   void LogRejection(RejectReason reason, const std::string& sensor_id, const std::string& detail);
 
@@ -48,6 +55,7 @@ class DdsIngest {
   dds_entity_t stop_condition_ = 0;
   std::atomic<bool> stop_{false};
   std::thread thread_;
+  std::mutex log_mutex_;  // LogRejection runs on the ingest thread and DDS's threads
   std::array<std::chrono::steady_clock::time_point, kRejectReasonCount> last_log_{};
   std::array<std::uint64_t, kRejectReasonCount> suppressed_{};
 };

@@ -45,8 +45,11 @@ struct SensorCountersAtomic {
 
 class IngestQueues {
  public:
-  // (sensor id, queue depth >= 1) for every configured sensor.
-  explicit IngestQueues(const std::vector<std::pair<std::string, std::size_t>>& sensors);
+  // (sensor id, queue depth >= 1) for every configured sensor. The queues together hold at
+  // most `max_queued_bytes` of clouds (0: no bound), plus one cloud per sensor: a sensor with
+  // an empty queue may always queue one.
+  explicit IngestQueues(const std::vector<std::pair<std::string, std::size_t>>& sensors,
+                        std::size_t max_queued_bytes = 0);
 
   [[nodiscard]] bool Known(const std::string& sensor_id) const;
   [[nodiscard]] std::vector<std::string> SensorIds() const;
@@ -58,15 +61,19 @@ class IngestQueues {
   [[nodiscard]] const RejectCounters& all_rejected() const { return all_rejected_; }
   void CountRejected(const std::string& sensor_id, RejectReason reason);
 
-  // Queues a validated cloud of a known sensor. With `stop` null, a full queue drops its
-  // oldest cloud (counted). Otherwise Push waits while the queue is full; it returns false
-  // (the cloud not queued, counted as dropped) if *stop becomes true while it waits.
+  // Queues a validated cloud of a known sensor. With `stop` null, a full queue (its depth, or
+  // the byte bound) drops its oldest cloud (counted). Otherwise Push waits while it is full;
+  // it returns false (the cloud not queued, counted as dropped) if *stop becomes true while
+  // it waits.
   bool Push(Cloud cloud, const std::atomic<bool>* stop = nullptr);
   // Moves every queued cloud into *out (oldest first per sensor). Waits until there is one,
   // Wake() is called or `until` passes. Returns true if *out is non-empty.
   bool PopAll(std::vector<Cloud>* out, std::chrono::steady_clock::time_point until);
   void Wake();
   [[nodiscard]] std::size_t Pending() const;
+  [[nodiscard]] std::size_t queued_bytes() const;
+  // What a cloud costs the byte bound: its points and flags.
+  [[nodiscard]] static std::size_t BytesOf(const Cloud& cloud);
 
  private:
   struct Slot {
@@ -74,7 +81,11 @@ class IngestQueues {
     std::deque<Cloud> queue;
     SensorCountersAtomic counters;
   };
+  [[nodiscard]] bool FullLocked(const Slot& slot, std::size_t bytes) const;
+
   std::map<std::string, std::unique_ptr<Slot>> slots_;  // fixed after construction
+  std::size_t max_queued_bytes_ = 0;
+  std::size_t queued_bytes_ = 0;  // under mutex_
   RejectCounters all_rejected_;
   mutable std::mutex mutex_;
   std::condition_variable cv_;        // clouds queued (or Wake)

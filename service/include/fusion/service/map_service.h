@@ -31,6 +31,7 @@ struct ServiceState {
   std::atomic<std::uint32_t> update_streams{0};  // open StreamUpdates subscriptions
   std::atomic<std::uint32_t> heavy_queries{0};   // FindPlanes, QueryBox, GetSnapshot running
   IngestPressure pressure;
+  QueryPool* heavy_pool = nullptr;  // runs FindPlanes, QueryBox, GetSnapshot's serialization
 };
 
 class MapService final : public fusion::v1::FusionMap::CallbackService {

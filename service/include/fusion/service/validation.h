@@ -26,6 +26,12 @@ struct IngestLimits {
 // max_bytes of the original kept ("...(N bytes)" says how long it was).
 [[nodiscard]] std::string LoggableText(std::string_view text, std::size_t max_bytes = 64);
 
+// The sensor id check alone (empty, or not configured): DDS ingest applies it before the
+// reader keeps any state for a sample, so unknown ids cost nothing however many there are.
+[[nodiscard]] std::optional<RejectReason> ValidateSensorId(
+    const char* sensor_id, const std::function<bool(const std::string&)>& is_known_sensor,
+    std::string* detail);
+
 // std::nullopt if the sample may be converted and integrated; otherwise the reason, with
 // *detail saying what exactly was wrong (for the log).
 [[nodiscard]] std::optional<RejectReason> ValidateSample(
