@@ -18,32 +18,32 @@ using namespace fusion::testing;  // NOLINT: the fixture and its helpers
 using namespace std::chrono_literals;
 namespace v1 = fusion::v1;
 
-// CPU time (user + system) fusiond has used, in clock ticks.
-long CpuTicks(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+// The fields of a /proc/.../stat file, numbered as proc(5) numbers them (field 1 at [1]).
+std::vector<std::string> StatFields(const std::filesystem::path& path) {
+  std::ifstream in(path);
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  std::istringstream fields(text.substr(text.rfind(')') + 2));
-  std::string field;
-  long utime = 0, stime = 0;
-  for (int i = 3; fields >> field; ++i) {  // field 3 is the state; 14 and 15 utime, stime
-    if (i == 14) utime = std::stol(field);
-    if (i == 15) stime = std::stol(field);
-  }
-  return utime + stime;
+  const auto paren = text.rfind(')');
+  if (paren == std::string::npos) return {};
+  // [1] pid and [2] comm (which may hold spaces) are not needed: placeholders.
+  std::vector<std::string> fields{"", "pid", "comm"};
+  std::istringstream rest(text.substr(paren + 2));
+  for (std::string field; rest >> field;) fields.push_back(field);
+  return fields;
 }
 
-// The nice values of fusiond's threads.
+// CPU time (user + system, fields 14 and 15) fusiond has used, in clock ticks.
+long CpuTicks(pid_t pid) {
+  const auto f = StatFields("/proc/" + std::to_string(pid) + "/stat");
+  return f.size() > 15 ? std::stol(f[14]) + std::stol(f[15]) : 0;
+}
+
+// The nice values (field 19) of fusiond's threads.
 std::set<int> NiceValues(pid_t pid) {
   std::set<int> values;
-  for (const auto& task : std::filesystem::directory_iterator("/proc/" + std::to_string(pid) +
-                                                              "/task")) {
-    std::ifstream in(task.path() / "stat");
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    std::istringstream fields(text.substr(text.rfind(')') + 2));
-    std::string field;
-    for (int i = 3; fields >> field; ++i) {
-      if (i == 19) values.insert(std::stoi(field));  // field 19: nice
-    }
+  for (const auto& task :
+       std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/task")) {
+    const auto f = StatFields(task.path() / "stat");
+    if (f.size() > 19) values.insert(std::stoi(f[19]));
   }
   return values;
 }
