@@ -177,7 +177,7 @@ fusion::v1::ServiceConfig DefaultConfig() {
   limits->set_max_update_streams(64);
   limits->set_max_plane_cells(32'000'000);
   limits->set_max_heavy_queries(4);
-  limits->set_heavy_query_nice(19);
+  limits->set_heavy_query_nice(13);
   limits->set_max_voxels_per_page(10'000);
   limits->set_max_box_voxels(100'000'000);
   limits->set_snapshot_chunk_bytes(1 << 20);

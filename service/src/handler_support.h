@@ -20,8 +20,8 @@ namespace fusion::service {
 [[nodiscard]] bool Stopped(const grpc::CallbackServerContext* context, const ServiceState* state);
 [[nodiscard]] grpc::Status DeadlineExceeded(const char* what);
 // Admission of an expensive call (docs/service.md, "Overload"): OK with *slot held, or the
-// status that sheds it (UNAVAILABLE while ingest drops clouds, RESOURCE_EXHAUSTED when
-// limits.max_heavy_queries run already).
+// status that sheds it: RESOURCE_EXHAUSTED when limits.max_heavy_queries run already; while
+// ingest drops clouds only one runs at a time, the others get UNAVAILABLE.
 [[nodiscard]] grpc::Status AdmitHeavy(ServiceState* state, const char* name,
                                       std::optional<CountedSlot>* slot);
 

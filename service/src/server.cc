@@ -5,7 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include "fusion/service/conversions.h"
-#include "fusion/service/dds_domain.h"
+#include "fusion/dds/participant.h"
 #include "fusion/service/dds_ingest.h"
 #include "fusion/service/fusion_worker.h"
 #include "fusion/service/ingest_queues.h"
@@ -106,7 +106,7 @@ bool FusionServer::Start(std::string* error) {
   p.persister->Start();
   p.state.persister = p.persister.get();
 
-  participant_ = CreateParticipant(config_.dds_domain(), error);
+  participant_ = fusion::dds::CreateParticipant(config_.dds_domain(), error);
   if (participant_ < 0) return false;
   DdsIngestOptions ingest_options;
   ingest_options.topic = config_.dds_topic();

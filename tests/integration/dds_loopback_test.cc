@@ -12,12 +12,12 @@
 #include <gtest/gtest.h>
 
 #include "../support/subprocess.h"
-#include "fusion/service/dds_domain.h"
+#include "fusion/dds/participant.h"
 #include "fusion_dds.h"
 
 namespace {
 
-using fusion::service::CreateParticipant;
+using fusion::dds::CreateParticipant;
 
 constexpr const char* kTopic = "fusion/points";
 

@@ -154,9 +154,9 @@ TEST_F(FusiondLimitsTest, ExpensiveRequestsAreRefusedOrEndWithTheirDeadline) {
     again = FindPlanes(45.0, 1.0, In(5s));
   }
   EXPECT_TRUE(again.ok()) << "the slot is not free again: " << again.error_message();
-  // The expensive calls run at limits.heavy_query_nice (19), the fusion worker at 10, gRPC's
+  // The expensive calls run at limits.heavy_query_nice (13), the fusion worker at 10, gRPC's
   // and DDS's threads at 0.
-  EXPECT_EQ(NiceValues(fusiond->pid()), (std::set<int>{0, 10, 19}));
+  EXPECT_EQ(NiceValues(fusiond->pid()), (std::set<int>{0, 10, 13}));
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
 }
 

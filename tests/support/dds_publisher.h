@@ -9,7 +9,7 @@
 #include <thread>
 #include <vector>
 
-#include "fusion/service/dds_domain.h"
+#include "fusion/dds/participant.h"
 #include "fusion_dds.h"
 
 namespace fusion::testing {
@@ -39,7 +39,7 @@ struct TestCloud {
 class TestPublisher {
  public:
   explicit TestPublisher(unsigned domain, const std::string& topic = "fusion/points") {
-    participant_ = fusion::service::CreateParticipant(domain, &error_);
+    participant_ = fusion::dds::CreateParticipant(domain, &error_);
     if (participant_ < 0) return;
     topic_ = dds_create_topic(participant_, &fusion_dds_PointCloud_desc, topic.c_str(), nullptr,
                               nullptr);

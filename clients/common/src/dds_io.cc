@@ -1,5 +1,7 @@
 #include "fusion/clients/dds_io.h"
 
+#include "fusion/dds/participant.h"
+
 #include <cstdlib>
 #include <cstring>
 #include <thread>
@@ -37,7 +39,7 @@ dds_qos_t* MakeQos(const PointsQos& qos) {
 Status CreateTopic(std::uint32_t domain_id, const std::string& topic_name,
                    dds_entity_t* participant, dds_entity_t* topic) {
   std::string error;
-  *participant = CreateParticipant(domain_id, &error);
+  *participant = fusion::dds::CreateParticipant(domain_id, &error);
   if (*participant < 0) return Status::Error(error);
   *topic = dds_create_topic(*participant, &fusion_dds_PointCloud_desc, topic_name.c_str(), nullptr,
                             nullptr);
@@ -50,34 +52,6 @@ Status CreateTopic(std::uint32_t domain_id, const std::string& topic_name,
 }
 
 }  // namespace
-
-const char* const kLoopbackDdsConfig =
-    R"(<CycloneDDS xmlns="https://cdds.io/config"><Domain id="any">)"
-    R"(<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>)"
-    R"(<AllowMulticast>false</AllowMulticast>)"
-    R"(<MaxMessageSize>65500B</MaxMessageSize><FragmentSize>65000B</FragmentSize></General>)"
-    R"(<Discovery><ParticipantIndex>auto</ParticipantIndex>)"
-    R"(<MaxAutoParticipantIndex>50</MaxAutoParticipantIndex>)"
-    R"(<Peers><Peer address="127.0.0.1"/></Peers></Discovery>)"
-    R"(<Internal><SocketReceiveBufferSize min="4MB"/></Internal>)"
-    R"(</Domain></CycloneDDS>)";
-
-dds_entity_t CreateParticipant(std::uint32_t domain_id, std::string* error) {
-  const char* uri = std::getenv("CYCLONEDDS_URI");
-  if (uri == nullptr || *uri == '\0') {
-    const dds_entity_t domain = dds_create_domain(domain_id, kLoopbackDdsConfig);
-    // PRECONDITION_NOT_MET: the domain exists already in this process; reuse it.
-    if (domain < 0 && domain != DDS_RETCODE_PRECONDITION_NOT_MET) {
-      if (error) *error = std::string("dds_create_domain: ") + dds_strretcode(domain);
-      return domain;
-    }
-  }
-  const dds_entity_t participant = dds_create_participant(domain_id, nullptr, nullptr);
-  if (participant < 0 && error) {
-    *error = std::string("dds_create_participant: ") + dds_strretcode(participant);
-  }
-  return participant;
-}
 
 std::int64_t UnixNowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(

@@ -48,7 +48,7 @@
 #include <vector>
 
 #include "../../support/subprocess.h"
-#include "fusion/service/dds_domain.h"
+#include "fusion/dds/participant.h"
 #include "fusion/sim/experiment.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
@@ -106,7 +106,7 @@ struct SensorStream {
 class Publisher {
  public:
   explicit Publisher(unsigned domain) {
-    participant_ = fusion::service::CreateParticipant(domain, &error_);
+    participant_ = fusion::dds::CreateParticipant(domain, &error_);
     if (participant_ < 0) return;
     topic_ = dds_create_topic(participant_, &fusion_dds_PointCloud_desc, "fusion/points", nullptr,
                               nullptr);

@@ -1,6 +1,6 @@
-// Clients' side of the DDS bus: a participant with the loopback configuration fusiond
-// embeds, and a writer and a reader of the "fusion/points" topic (fusion_dds_PointCloud).
-// Clients may not link the service, so the configuration is repeated here on purpose.
+// Clients' side of the DDS bus: a writer and a reader of the "fusion/points" topic
+// (fusion_dds_PointCloud), in a participant of fusion/dds/participant.h (the configuration
+// fusiond uses too).
 #pragma once
 
 #include <dds/dds.h>
@@ -18,14 +18,6 @@
 namespace fusion::clients {
 
 inline constexpr const char* kPointsTopic = "fusion/points";
-
-// Cyclone DDS configuration that stays on 127.0.0.1 without multicast, with fragment and
-// socket-buffer sizes that carry multi-megabyte clouds (same as fusiond's, PLATFORM.md).
-extern const char* const kLoopbackDdsConfig;
-
-// Creates the domain with kLoopbackDdsConfig unless CYCLONEDDS_URI is set, then a participant.
-// Returns the participant, or a negative DDS return code with *error naming the failing call.
-dds_entity_t CreateParticipant(std::uint32_t domain_id, std::string* error);
 
 struct PointsQos {
   // Sensor data (best effort, keep last `depth`) by default. Reliable writers keep all and

@@ -1,8 +1,8 @@
-#include "fusion/service/dds_domain.h"
+#include "fusion/dds/participant.h"
 
 #include <cstdlib>
 
-namespace fusion::service {
+namespace fusion::dds {
 
 const char* const kLoopbackDdsConfig =
     R"(<CycloneDDS xmlns="https://cdds.io/config"><Domain id="any">)"
@@ -35,4 +35,4 @@ dds_entity_t CreateParticipant(std::uint32_t domain_id, std::string* error) {
   return participant;
 }
 
-}  // namespace fusion::service
+}  // namespace fusion::dds
