@@ -11,7 +11,7 @@
 #include <memory>
 #include <vector>
 
-#include "fusion/core/beam_grid.h"
+#include "fusion/core/beam_types.h"
 #include "fusion/core/forward_model.h"
 #include "fusion/core/sensor.h"
 

@@ -32,7 +32,7 @@
 #include <optional>
 #include <vector>
 
-#include "fusion/core/beam_grid.h"
+#include "fusion/core/beam_types.h"
 #include "fusion/core/sensor.h"
 
 namespace fusion {

@@ -1,0 +1,55 @@
+// The plain types of a beam grid: its options, one reading along a beam, what an integration
+// did, and where a beam's information lies. No behaviour; everything beam-related includes it.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace fusion {
+
+enum class BeamRepresentation { kDense, kUnrolledLinkedList };
+
+struct BeamGridOptions {
+  double cell_size_m = 0.001;
+  // Prior occupancy of each cell. Default (negative): chosen so that a run of cells
+  // prior_reference_length_m long has prior occupancy 0.5, i.e. a map voxel of that size
+  // starts unknown; p0 = 1 - 0.5^(cell_size / reference_length).
+  double prior_cell_occupancy = -1.0;
+  double prior_reference_length_m = 0.05;
+  BeamRepresentation representation = BeamRepresentation::kUnrolledLinkedList;
+};
+
+// What happened to one cloud: every point is accounted for in exactly one counter.
+struct IntegrationStats {
+  std::size_t updated = 0;             // range readings applied
+  std::size_t beyond_range = 0;        // beyond-range readings applied (evidence for B_{N+1})
+  std::size_t missing = 0;             // NaN / zero points: no information, beam untouched
+  std::size_t rejected_nonfinite = 0;  // inf or mixed NaN coordinates
+  std::size_t rejected_outside_fov = 0;
+  std::size_t rejected_outside_map = 0;  // world position beyond the map's keys (SensorPeriods)
+};
+
+// Where a beam's information lies, from a start range on (BeamGrid::Profile).
+struct BeamProfile {
+  // Range (cell edge) where the first-hit mass starts: the first cell whose p(m) exceeds
+  // free_ratio times the prior; +infinity if no cell does (the beam is free to its end).
+  double mass_begin_m = 0.0;
+  // InformationEndM(beam, from_m, tail_fraction).
+  double info_end_m = 0.0;
+  // The free zone [from_m, min(mass_begin_m, beam end)): its cumulative hazard against the
+  // prior's over the same length, as log-odds (about the evidence a voxel-long segment of the
+  // zone carries, logit(p) - logit(prior)); -infinity if the zone is empty.
+  double free_log_odds = 0.0;
+  // InformationEndM(beam, from_m, 0.5): the first hit is as likely before as after it (where
+  // the beam's surface is); +infinity if the beam more likely sees through.
+  double median_m = 0.0;
+};
+
+// One reading along a beam.
+struct Reading {
+  enum class Kind : std::uint8_t { kRange, kBeyondRange, kMissing };
+  Kind kind = Kind::kMissing;
+  double range_m = 0.0;
+};
+
+}  // namespace fusion
