@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <mutex>
 #include <set>
 
@@ -24,6 +25,36 @@ using grpc::StatusCode;
 constexpr double kMaxRayRangeM = 1000.0;
 constexpr std::uint32_t kMaxPlanes = 64;
 constexpr std::size_t kDeadlineCheckEvery = 4096;
+// QueryBox boxes up to this many voxels (64^3) are answered on gRPC's threads.
+constexpr double kCheapBoxVoxels = 262'144;
+
+// Whether the node at `depth` whose iterator key is `key` (its centre) shares a voxel with the
+// key box [kmin, kmax]. OctoMap's leaf_bbx_iterator also yields nodes that end one key before
+// the box's minimum, so QueryBox checks every leaf it yields.
+bool NodeOverlapsKeyBox(const octomap::OcTreeKey& key, unsigned depth,
+                        const octomap::OcTreeKey& kmin, const octomap::OcTreeKey& kmax) {
+  const unsigned half = depth >= 16 ? 0u : (32768u >> depth);
+  for (int axis = 0; axis < 3; ++axis) {
+    const unsigned lo = key[axis] - half;
+    const unsigned hi = half == 0 ? key[axis] : key[axis] + half - 1;
+    if (hi < kmin[axis] || lo > kmax[axis]) return false;
+  }
+  return true;
+}
+
+// Voxels of a QueryBox request's box at the given resolution (+inf for an invalid box: the
+// handler then refuses it).
+double BoxVoxels(const fusion::v1::QueryBoxRequest& request, double resolution_m) {
+  double voxels = 1.0;
+  const auto axis = [&](double lo, double hi) {
+    const double n = std::floor(hi / resolution_m) - std::floor(lo / resolution_m) + 1.0;
+    voxels *= std::isfinite(n) && n >= 1.0 ? n : std::numeric_limits<double>::infinity();
+  };
+  axis(request.min().x(), request.max().x());
+  axis(request.min().y(), request.max().y());
+  axis(request.min().z(), request.max().z());
+  return voxels;
+}
 
 bool FinitePoint(const fusion::v1::Point& p) {
   return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
@@ -88,8 +119,8 @@ grpc::ServerUnaryReactor* MapService::GetStats(grpc::CallbackServerContext* cont
     reply->set_clouds_integrated(state_->worker->integrated());
     reply->set_renders(state_->worker->renders());
     reply->set_clouds_in_map(state_->worker->in_map());
-    reply->set_map_leaves(snapshot->tree->getNumLeafNodes());
-    reply->set_map_memory_bytes(snapshot->tree->memoryUsage());
+    reply->set_map_leaves(snapshot->sizes().leaves);
+    reply->set_map_memory_bytes(snapshot->sizes().memory_bytes);
     reply->set_resolution_m(snapshot->tree->getResolution());
     reply->set_sensor_memory_bytes(memory);
     reply->set_snapshots_saved(state_->persister->saves());
@@ -141,7 +172,7 @@ grpc::ServerUnaryReactor* MapService::QueryPoints(grpc::CallbackServerContext* c
 grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* context,
                                                const fusion::v1::QueryBoxRequest* request,
                                                fusion::v1::QueryBoxResponse* reply) {
-  return Heavy(context, state_, "QueryBox", [this, context, request, reply]() -> Status {
+  auto body = [this, context, request, reply]() -> Status {
     const auto& limits = state_->config.limits();
     if (!FinitePoint(request->min()) || !FinitePoint(request->max())) {
       return Status(StatusCode::INVALID_ARGUMENT, "min and max must be finite");
@@ -219,6 +250,7 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
         }
         const octomap::OcTreeKey k = it.getKey();
         if (has_token && !KeyLess(after, k)) continue;
+        if (!NodeOverlapsKeyBox(k, it.getDepth(), kmin, kmax)) continue;
         if (states.count(StateOfNode(&*it, state_->thresholds)) == 0) continue;
         // The page + 1 smallest keys, in a max-heap: memory is one page whatever the box holds.
         if (found.size() == page + 1 && !KeyLess(k, found.front().key)) continue;
@@ -238,7 +270,12 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
     }
     if (more) reply->set_next_page_token(EncodeToken(found.back().key));
     return Status::OK;
-  });
+  };
+  // A small box is a cheap call (at most kCheapBoxVoxels lookups); a larger one is admitted as
+  // an expensive call and runs on the heavy-query pool.
+  return BoxVoxels(*request, state_->hub->Current()->tree->getResolution()) <= kCheapBoxVoxels
+             ? Unary(context, state_, "QueryBox", body)
+             : Heavy(context, state_, "QueryBox", body);
 }
 
 grpc::ServerUnaryReactor* MapService::CastRay(grpc::CallbackServerContext* context,

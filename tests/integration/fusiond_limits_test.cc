@@ -160,4 +160,42 @@ TEST_F(FusiondLimitsTest, ExpensiveRequestsAreRefusedOrEndWithTheirDeadline) {
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
 }
 
+// A QueryBox returns only voxels that share space with the box: the 12.8 m free leaf of the
+// snapshot ends at x = 12.8 m and must not come back for a box from x = 12.825 m (OctoMap's
+// bbx iterator yields it).
+TEST_F(FusiondLimitsTest, QueryBoxReturnsOnlyVoxelsThatOverlapTheBox) {
+  WriteBlockSnapshot();
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  const auto query = [&](const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+    grpc::ClientContext context;
+    context.set_deadline(In(10s));
+    v1::QueryBoxRequest request;
+    *request.mutable_min() = P(lo);
+    *request.mutable_max() = P(hi);
+    request.add_states(v1::VOXEL_STATE_FREE);
+    request.add_states(v1::VOXEL_STATE_OCCUPIED);
+    v1::QueryBoxResponse reply;
+    EXPECT_TRUE(stub_->QueryBox(&context, request, &reply).ok());
+    return reply;
+  };
+  // Whether a voxel shares space (more than a face) with the box.
+  const auto overlaps = [](const v1::Voxel& v, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+    const Eigen::Vector3d c(v.center().x(), v.center().y(), v.center().z());
+    const Eigen::Vector3d half = Eigen::Vector3d::Constant(0.5 * v.size_m() - 1e-6);
+    return ((c - half).array() <= hi.array()).all() && ((c + half).array() >= lo.array()).all();
+  };
+  const Eigen::Vector3d lo(12.825, 0.1, 0.1), hi(13.5, 1.0, 1.0);
+  for (const auto& v : query(lo, hi).voxels()) {
+    ADD_FAILURE() << "a voxel of " << v.size_m() << " m at (" << v.center().x() << ", "
+                  << v.center().y() << ", " << v.center().z() << ") outside the box";
+  }
+  // A box reaching 12.7 m holds free space of the cube: found, and nothing beyond the box.
+  const Eigen::Vector3d inside_lo(12.7, 0.1, 0.1);
+  const v1::QueryBoxResponse inside = query(inside_lo, hi);
+  EXPECT_GE(inside.voxels_size(), 1);
+  for (const auto& v : inside.voxels()) EXPECT_TRUE(overlaps(v, inside_lo, hi)) << v.size_m();
+  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+}
+
 }  // namespace

@@ -21,6 +21,21 @@ namespace fusion::service {
 struct MapSnapshot {
   std::uint64_t version = 0;
   std::shared_ptr<const octomap::OcTree> tree;  // never null
+
+  struct Sizes {
+    std::size_t leaves = 0;
+    std::size_t memory_bytes = 0;
+  };
+  // The tree's leaf count and memory, computed once per version (each walks the whole tree)
+  // by the first caller, then shared: GetStats stays cheap however often it is called.
+  [[nodiscard]] const Sizes& sizes() const {
+    std::call_once(sizes_once_, [this] { sizes_ = {tree->getNumLeafNodes(), tree->memoryUsage()}; });
+    return sizes_;
+  }
+
+ private:
+  mutable std::once_flag sizes_once_;
+  mutable Sizes sizes_;
 };
 
 class SnapshotHub {
