@@ -30,7 +30,8 @@ constexpr const char* kUsage = R"(fusionctl: command-line client of fusiond
 
 Usage: fusionctl [--server HOST:PORT] [--timeout SECONDS] COMMAND [ARGS] [OPTIONS]
   --server HOST:PORT   fusiond's gRPC address (default $FUSIOND_ADDRESS or 127.0.0.1:50051)
-  --timeout SECONDS    deadline of each call (default 10; watch: none)
+  --timeout SECONDS    deadline of each call (default 10, at least 60 for planes and
+                       snapshots; watch: none)
 
 Commands:
   health                        grpc.health.v1 check; exit 0 when SERVING
@@ -296,7 +297,7 @@ int Planes(Context& ctx, const Args& args) {
     }
   }
   grpc::ClientContext context;
-  SetDeadline(&context, ctx.timeout_s);
+  SetDeadline(&context, std::max(ctx.timeout_s, 60.0));  // an expensive call, like snapshots
   fusion::v1::FindPlanesResponse reply;
   const auto status = ctx.stub->FindPlanes(&context, request, &reply);
   if (!status.ok()) return Failed(ctx, status);

@@ -186,7 +186,8 @@ TEST_F(FusiondLimitsTest, QueryBoxReturnsOnlyVoxelsThatOverlapTheBox) {
     return ((c - half).array() <= hi.array()).all() && ((c + half).array() >= lo.array()).all();
   };
   const Eigen::Vector3d lo(12.825, 0.1, 0.1), hi(13.5, 1.0, 1.0);
-  for (const auto& v : query(lo, hi).voxels()) {
+  const v1::QueryBoxResponse beside = query(lo, hi);
+  for (const auto& v : beside.voxels()) {
     ADD_FAILURE() << "a voxel of " << v.size_m() << " m at (" << v.center().x() << ", "
                   << v.center().y() << ", " << v.center().z() << ") outside the box";
   }

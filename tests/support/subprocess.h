@@ -5,6 +5,7 @@
 #include <poll.h>
 #include <signal.h>
 #include <sys/file.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -23,8 +24,14 @@ class Subprocess {
   explicit Subprocess(std::vector<std::string> argv, std::vector<std::string> extra_env = {}) {
     int out[2];
     if (pipe(out) != 0) return;
+    const pid_t parent = getpid();
     pid_ = fork();
     if (pid_ == 0) {
+      // A test that dies (a sanitizer abort, a crash) takes its processes with it: an orphaned
+      // fusiond would keep ctest waiting on the output pipe until its timeout. (The signal comes
+      // when the thread that forked ends: start processes from threads that outlive them.)
+      prctl(PR_SET_PDEATHSIG, SIGKILL);
+      if (getppid() != parent) _exit(127);  // the parent died before prctl
       dup2(out[1], STDOUT_FILENO);
       close(out[0]);
       close(out[1]);
