@@ -99,6 +99,10 @@ struct PngReadState {
   }
 };
 
+// A PNG header may claim up to 10^6 x 10^6 pixels (libpng's default limits) before any of them
+// is read: allocate only for plausible depth images (4096 x 4096; a TUM frame is 640 x 480).
+constexpr std::uint64_t kMaxPngPixels = std::uint64_t{1} << 24;
+
 void PngError(png_structp png, png_const_charp message) {
   static_cast<PngReadState*>(png_get_error_ptr(png))->error = message;
   png_longjmp(png, 1);
@@ -131,6 +135,11 @@ Status ReadPng16(const std::string& path, std::uint32_t* width, std::uint32_t* h
   if (depth != 16 || color != PNG_COLOR_TYPE_GRAY) {
     return Status::Error(path + ": expected a 16-bit grayscale depth PNG, got bit depth " +
                          std::to_string(depth) + ", colour type " + std::to_string(color));
+  }
+  if (std::uint64_t{w} * h > kMaxPngPixels) {
+    return Status::Error(path + ": " + std::to_string(w) + " x " + std::to_string(h) +
+                         " pixels is more than the " + std::to_string(kMaxPngPixels) +
+                         " a depth image may have");
   }
   png_set_swap(state.png);  // PNG stores 16-bit samples big-endian
   png_read_update_info(state.png, state.info);
@@ -356,7 +365,9 @@ Status ReadPcd(const std::string& path, fusion::v1::RecordedCloud* cloud, bool a
     }
   }
 
-  std::vector<float> xyz(points * 3, kNaN);
+  // Sized only once the data is known to hold the points: the header alone may claim 2^28 of
+  // them (3 GB of floats from a 100-byte file).
+  std::vector<float> xyz;
   if (data_kind == "ascii") {
     std::istringstream body(content.substr(pos));
     std::string line;
@@ -372,6 +383,7 @@ Status ReadPcd(const std::string& path, fusion::v1::RecordedCloud* cloud, bool a
                      std::to_string(values_per_point) + " values, got " +
                      std::to_string(tokens.size()));
       }
+      xyz.resize(3 * (i + 1));
       for (int a = 0; a < 3; ++a) {
         const std::string& t = tokens[fields[static_cast<std::size_t>(xyz_field[a])].first_value];
         char* end = nullptr;
@@ -390,6 +402,7 @@ Status ReadPcd(const std::string& path, fusion::v1::RecordedCloud* cloud, bool a
       return error("binary data has " + std::to_string(content.size() - pos) + " bytes, needs " +
                    std::to_string(points * point_step));
     }
+    xyz.assign(points * 3, kNaN);
     const auto* data = reinterpret_cast<const unsigned char*>(content.data() + pos);
     for (std::uint64_t i = 0; i < points; ++i) {
       for (int a = 0; a < 3; ++a) {
@@ -411,11 +424,18 @@ Status ReadPcd(const std::string& path, fusion::v1::RecordedCloud* cloud, bool a
                    " compressed bytes announced, " + std::to_string(content.size() - pos - 8) +
                    " present)");
     }
+    // An LZF back-reference of 3 bytes yields at most 264: anything beyond 88x is corrupt (and
+    // would otherwise be allocated before the data is looked at).
+    if (uncompressed > std::uint64_t{88} * compressed) {
+      return error("binary_compressed: " + std::to_string(compressed) +
+                   " compressed bytes cannot hold " + std::to_string(uncompressed));
+    }
     std::vector<unsigned char> data(uncompressed);
     if (LzfDecompress(content.data() + pos + 8, compressed, data.data(), data.size()) !=
         uncompressed) {
       return error("binary_compressed: corrupt LZF data");
     }
+    xyz.assign(points * 3, kNaN);
     // Column-wise: all values of field 0, then of field 1, ...
     for (int a = 0; a < 3; ++a) {
       const PcdField& f = fields[static_cast<std::size_t>(xyz_field[a])];
@@ -433,6 +453,8 @@ Status ReadPcd(const std::string& path, fusion::v1::RecordedCloud* cloud, bool a
   double qnorm = std::sqrt(viewpoint[3] * viewpoint[3] + viewpoint[4] * viewpoint[4] +
                            viewpoint[5] * viewpoint[5] + viewpoint[6] * viewpoint[6]);
   if (qnorm < 1e-9) return error("VIEWPOINT quaternion is zero");
+  // Components near 1e200 are finite, but their norm is not: the pose would become all zero.
+  if (!std::isfinite(qnorm)) return error("VIEWPOINT quaternion is too large to normalize");
   if (!apply_viewpoint) {
     viewpoint[0] = viewpoint[1] = viewpoint[2] = viewpoint[4] = viewpoint[5] = viewpoint[6] = 0;
     viewpoint[3] = qnorm = 1;

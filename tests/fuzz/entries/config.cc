@@ -1,0 +1,46 @@
+// fusiond's configuration file: LoadConfigFile over the defaults, as main.cc loads --config.
+// A configuration it accepts must also convert into core types without an error.
+#include "fusion/service/config.h"
+
+#include <string>
+
+#include "common.h"
+#include "fusion/service/conversions.h"
+
+namespace fusion::fuzz {
+namespace {
+
+Outcome CheckAccepted(const fusion::v1::ServiceConfig& config) {
+  std::string error;
+  for (int i = 0; i < config.sensors_size(); ++i) {
+    if (!service::SensorSetupFromConfig(config.sensors(i), &error)) {
+      return Broken("accepted sensors[" + std::to_string(i) + "] does not convert: " + error);
+    }
+  }
+  if (!service::WorldMapOptionsFromConfig(config.map(), &error)) {
+    return Broken("accepted map does not convert: " + error);
+  }
+  if (!service::ValidateConfig(config, &error)) return Broken("not valid twice: " + error);
+  return Accepted();
+}
+
+Outcome RunConfig(const std::uint8_t* data, std::size_t size, const char* name) {
+  const std::string path = WriteScratch(name, data, size);
+  if (path.empty()) return Broken("cannot write the scratch file");
+  auto config = service::DefaultConfig();
+  std::string error;
+  if (!service::LoadConfigFile(path, &config, &error)) return Rejected(error);
+  return CheckAccepted(config);
+}
+
+}  // namespace
+
+Outcome RunConfigText(const std::uint8_t* data, std::size_t size) {
+  return RunConfig(data, size, "fusiond.pbtxt");
+}
+
+Outcome RunConfigJson(const std::uint8_t* data, std::size_t size) {
+  return RunConfig(data, size, "fusiond.json");
+}
+
+}  // namespace fusion::fuzz
