@@ -35,6 +35,9 @@ FLAGS=(-DCMAKE_C_FLAGS_RELWITHDEBINFO="-O2 -gline-tables-only"
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -gline-tables-only")
 
 build_fuzzers() {
+  # Debian's clang brings libFuzzer and the sanitizer runtimes (libclang-common-14-dev).
+  PACKAGES+=(clang)
+  ensure_packages
   if [ ! -f "$FUZZ_DIR/build.ninja" ]; then
     log "configuring $FUZZ_DIR (clang, address+undefined, libFuzzer)"
     CC=clang CXX=clang++ cmake -S "$ROOT" -B "$FUZZ_DIR" -G Ninja \

@@ -33,11 +33,13 @@ using namespace std::chrono_literals;
 namespace v1 = fusion::v1;
 namespace fs = std::filesystem;
 
-// Runs fusionctl against `server`; returns its exit code and stdout.
+// Runs fusionctl against `server`; returns its exit code and stdout. `planes` is an expensive
+// call on fusiond's low-priority pool (fusionctl waits up to 60 s for it): under sanitizers,
+// with both sensors streaming, it takes tens of seconds.
 int Fusionctl(const std::string& server, std::vector<std::string> args, std::string* out) {
   std::vector<std::string> argv = {"fusionctl", "--server", server, "--timeout", "5"};
   argv.insert(argv.end(), args.begin(), args.end());
-  return RunTool(argv, out, 30s);
+  return RunTool(argv, out, 90s);
 }
 
 // `fusionctl sensors` rows: sensor -> integrated clouds.
@@ -113,7 +115,8 @@ TEST_F(E2eComposeTopologyTest, SensorsFusiondAndClientMapTheBoard) {
   // The board: a plane facing the sensors (normal along x) at d = 1.75 m.
   std::vector<Plane> planes;
   bool found = false;
-  while (!found && std::chrono::steady_clock::now() < end) {
+  const auto planes_end = std::chrono::steady_clock::now() + 120s;
+  while (!found && std::chrono::steady_clock::now() < planes_end) {
     ASSERT_EQ(Fusionctl(address_, {"planes"}, &out), 0) << out;
     planes = ParsePlanes(out);
     for (const auto& p : planes) {
