@@ -96,8 +96,7 @@ summary() {
 fuzz_all() {
   local flags="$1"
   shift
-  local targets=("$@") failed=0 t
-  declare -A pids=() starts=()
+  local targets=("$@") t
   local results="$FUZZ_DIR/logs/results.txt"
   mkdir -p "$FUZZ_DIR/logs"
   : >"$results"
