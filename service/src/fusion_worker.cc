@@ -1,15 +1,13 @@
 #include "fusion/service/fusion_worker.h"
 
 #include <spdlog/spdlog.h>
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
 
 #include "fusion/core/projective_render.h"
+#include "fusion/service/admission.h"
 
 namespace fusion::service {
 
@@ -36,10 +34,8 @@ namespace {
 
 void LowerPriority(int nice, const char* what) {
   // Queries come first: the worker's threads (and the render threads they start, which inherit
-  // this) run at a lower priority than the gRPC and DDS threads. Linux keeps a nice value per
-  // thread.
-  if (nice > 0 &&
-      setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), nice) != 0) {
+  // this) run at a lower priority than the gRPC and DDS threads (admission.h's SetThreadNice).
+  if (nice > 0 && !SetThreadNice(nice)) {
     spdlog::warn("worker: could not lower the priority of the {}: {}", what, std::strerror(errno));
   }
 }
