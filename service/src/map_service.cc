@@ -2,96 +2,23 @@
 
 #include <spdlog/spdlog.h>
 
-#include <algorithm>
-#include <cmath>
-#include <cstdio>
-#include <limits>
-#include <mutex>
-#include <set>
-
 #include "fusion/core/octree_merge.h"
 #include "fusion/core/planes.h"
 #include "fusion/service/persistence.h"
+#include "fusion/service/request_checks.h"
 #include "handler_support.h"
+#include "map_queries.h"
 #include "map_streams.h"
 
 namespace fusion::service {
 namespace {
 
-using fusion::v1::VoxelState;
 using grpc::Status;
 using grpc::StatusCode;
 
-constexpr double kMaxRayRangeM = 1000.0;
-constexpr std::uint32_t kMaxPlanes = 64;
 constexpr std::size_t kDeadlineCheckEvery = 4096;
 // QueryBox boxes up to this many voxels (64^3) are answered on gRPC's threads.
 constexpr double kCheapBoxVoxels = 262'144;
-
-// Whether the node at `depth` whose iterator key is `key` (its centre) shares a voxel with the
-// key box [kmin, kmax]. OctoMap's leaf_bbx_iterator also yields nodes that end one key before
-// the box's minimum, so QueryBox checks every leaf it yields.
-bool NodeOverlapsKeyBox(const octomap::OcTreeKey& key, unsigned depth,
-                        const octomap::OcTreeKey& kmin, const octomap::OcTreeKey& kmax) {
-  const unsigned half = depth >= 16 ? 0u : (32768u >> depth);
-  for (int axis = 0; axis < 3; ++axis) {
-    const unsigned lo = key[axis] - half;
-    const unsigned hi = half == 0 ? key[axis] : key[axis] + half - 1;
-    if (hi < kmin[axis] || lo > kmax[axis]) return false;
-  }
-  return true;
-}
-
-// Voxels of a QueryBox request's box at the given resolution (+inf for an invalid box: the
-// handler then refuses it).
-double BoxVoxels(const fusion::v1::QueryBoxRequest& request, double resolution_m) {
-  double voxels = 1.0;
-  const auto axis = [&](double lo, double hi) {
-    const double n = std::floor(hi / resolution_m) - std::floor(lo / resolution_m) + 1.0;
-    voxels *= std::isfinite(n) && n >= 1.0 ? n : std::numeric_limits<double>::infinity();
-  };
-  axis(request.min().x(), request.max().x());
-  axis(request.min().y(), request.max().y());
-  axis(request.min().z(), request.max().z());
-  return voxels;
-}
-
-bool FinitePoint(const fusion::v1::Point& p) {
-  return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
-}
-
-// Key of a world point if it lies inside the octree's key range.
-bool KeyOf(const octomap::OcTree& tree, const Eigen::Vector3d& p, octomap::OcTreeKey* key) {
-  return tree.coordToKeyChecked(
-      octomap::point3d(static_cast<float>(p.x()), static_cast<float>(p.y()),
-                       static_cast<float>(p.z())),
-      *key);
-}
-
-double ProbabilityOf(const octomap::OcTreeNode* node) {
-  return node != nullptr ? node->getOccupancy() : 0.5;
-}
-
-VoxelState StateOfNode(const octomap::OcTreeNode* node, const StateThresholds& t) {
-  return node != nullptr ? StateOf(node->getOccupancy(), t) : fusion::v1::VOXEL_STATE_UNKNOWN;
-}
-
-std::string EncodeToken(const octomap::OcTreeKey& key) {
-  return "k" + std::to_string(key[0]) + "." + std::to_string(key[1]) + "." + std::to_string(key[2]);
-}
-
-bool DecodeToken(const std::string& token, octomap::OcTreeKey* key) {
-  unsigned a = 0, b = 0, c = 0;
-  char tail = 0;
-  if (std::sscanf(token.c_str(), "k%u.%u.%u%c", &a, &b, &c, &tail) != 3) return false;
-  if (a > 0xffff || b > 0xffff || c > 0xffff) return false;
-  *key = octomap::OcTreeKey(a, b, c);
-  return true;
-}
-
-bool KeyLess(const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
-  return std::make_tuple(a[0], a[1], a[2]) < std::make_tuple(b[0], b[1], b[2]);
-}
 
 }  // namespace
 
@@ -140,17 +67,8 @@ grpc::ServerUnaryReactor* MapService::QueryPoints(grpc::CallbackServerContext* c
                                                   const fusion::v1::QueryPointsRequest* request,
                                                   fusion::v1::QueryPointsResponse* reply) {
   return Unary(context, state_, "QueryPoints", [&] {
-    const auto limit = state_->config.limits().max_points_per_query();
-    if (static_cast<std::uint64_t>(request->points_size()) > limit) {
-      return Status(StatusCode::RESOURCE_EXHAUSTED,
-                    std::to_string(request->points_size()) + " points; the limit is " +
-                        std::to_string(limit) + " per call (limits.max_points_per_query)");
-    }
-    for (int i = 0; i < request->points_size(); ++i) {
-      if (!FinitePoint(request->points(i))) {
-        return Status(StatusCode::INVALID_ARGUMENT,
-                      "points[" + std::to_string(i) + "] has a NaN or infinite coordinate");
-      }
+    if (Status checked = CheckQueryPoints(*request, state_->config.limits()); !checked.ok()) {
+      return checked;
     }
     const auto snapshot = state_->hub->Current();
     const octomap::OcTree& tree = *snapshot->tree;
@@ -174,36 +92,12 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
                                                fusion::v1::QueryBoxResponse* reply) {
   auto body = [this, context, request, reply]() -> Status {
     const auto& limits = state_->config.limits();
-    if (!FinitePoint(request->min()) || !FinitePoint(request->max())) {
-      return Status(StatusCode::INVALID_ARGUMENT, "min and max must be finite");
-    }
-    const Eigen::Vector3d lo = FromProto(request->min()), hi = FromProto(request->max());
-    if ((lo.array() > hi.array()).any()) {
-      return Status(StatusCode::INVALID_ARGUMENT, "min must not exceed max on any axis");
-    }
-    const std::uint32_t page =
-        request->page_size() == 0 ? limits.max_voxels_per_page() : request->page_size();
-    if (page > limits.max_voxels_per_page()) {
-      return Status(StatusCode::RESOURCE_EXHAUSTED,
-                    "page_size " + std::to_string(page) + " exceeds limits.max_voxels_per_page " +
-                        std::to_string(limits.max_voxels_per_page()));
-    }
-    std::set<int> states(request->states().begin(), request->states().end());
-    if (states.empty()) states = {fusion::v1::VOXEL_STATE_OCCUPIED, fusion::v1::VOXEL_STATE_FREE};
-    for (int s : states) {
-      if (!fusion::v1::VoxelState_IsValid(s)) {
-        return Status(StatusCode::INVALID_ARGUMENT, "states: unknown value " + std::to_string(s));
-      }
-    }
-    octomap::OcTreeKey after(0, 0, 0);
-    const bool has_token = !request->page_token().empty();
-    if (has_token && !DecodeToken(request->page_token(), &after)) {
-      return Status(StatusCode::INVALID_ARGUMENT, "page_token is malformed");
-    }
+    BoxQuery query;
+    if (Status checked = CheckQueryBox(*request, limits, &query); !checked.ok()) return checked;
     const auto snapshot = state_->hub->Current();
     const octomap::OcTree& tree = *snapshot->tree;
     octomap::OcTreeKey kmin, kmax;
-    if (!KeyOf(tree, lo, &kmin) || !KeyOf(tree, hi, &kmax)) {
+    if (!KeyOf(tree, query.min_m, &kmin) || !KeyOf(tree, query.max_m, &kmax)) {
       return Status(StatusCode::INVALID_ARGUMENT, "the box reaches outside the map's key range");
     }
     const double voxels = double(kmax[0] - kmin[0] + 1) * double(kmax[1] - kmin[1] + 1) *
@@ -215,60 +109,17 @@ grpc::ServerUnaryReactor* MapService::QueryBox(grpc::CallbackServerContext* cont
                         std::to_string(limits.max_box_voxels()));
     }
     reply->set_map_version(snapshot->version);
-    struct Found {
-      octomap::OcTreeKey key;
-      unsigned depth;
-      const octomap::OcTreeNode* node;
-    };
-    const auto less = [](const Found& a, const Found& b) { return KeyLess(a.key, b.key); };
-    std::vector<Found> found;
-    found.reserve(std::min<std::size_t>(page + 1, 1 << 16));
-    std::size_t visited = 0;
-    if (states.count(fusion::v1::VOXEL_STATE_UNKNOWN) != 0) {
-      // Unknown voxels have no node: walk every key of the box in order, after the token.
-      octomap::OcTreeKey k = kmin;
-      for (unsigned x = kmin[0]; x <= kmax[0] && found.size() <= page; ++x) {
-        for (unsigned y = kmin[1]; y <= kmax[1] && found.size() <= page; ++y) {
-          for (unsigned z = kmin[2]; z <= kmax[2] && found.size() <= page; ++z) {
-            k = octomap::OcTreeKey(x, y, z);
-            if (++visited % kDeadlineCheckEvery == 0 && Stopped(context, state_)) {
-              return DeadlineExceeded("QueryBox");
-            }
-            if (has_token && !KeyLess(after, k)) continue;
-            const octomap::OcTreeNode* node = tree.search(k);
-            if (states.count(StateOfNode(node, state_->thresholds)) != 0) {
-              found.push_back({k, tree.getTreeDepth(), node});
-            }
-          }
-        }
-      }
-    } else {
-      for (auto it = tree.begin_leafs_bbx(kmin, kmax), end = tree.end_leafs_bbx(); it != end;
-           ++it) {
-        if (++visited % kDeadlineCheckEvery == 0 && Stopped(context, state_)) {
-          return DeadlineExceeded("QueryBox");
-        }
-        const octomap::OcTreeKey k = it.getKey();
-        if (has_token && !KeyLess(after, k)) continue;
-        if (!NodeOverlapsKeyBox(k, it.getDepth(), kmin, kmax)) continue;
-        if (states.count(StateOfNode(&*it, state_->thresholds)) == 0) continue;
-        // The page + 1 smallest keys, in a max-heap: memory is one page whatever the box holds.
-        if (found.size() == page + 1 && !KeyLess(k, found.front().key)) continue;
-        found.push_back({k, it.getDepth(), &*it});
-        std::push_heap(found.begin(), found.end(), less);
-        if (found.size() > page + 1) {
-          std::pop_heap(found.begin(), found.end(), less);
-          found.pop_back();
-        }
-      }
-      std::sort_heap(found.begin(), found.end(), less);
+    std::vector<BoxVoxel> page;
+    if (!CollectBoxPage(tree, kmin, kmax, query, state_->thresholds,
+                        [this, context] { return Stopped(context, state_); }, &page)) {
+      return DeadlineExceeded("QueryBox");
     }
-    const bool more = found.size() > page;
-    if (more) found.resize(page);
-    for (const Found& f : found) {
-      VoxelToProto(tree, f.key, f.depth, f.node, state_->thresholds, reply->add_voxels());
+    const bool more = page.size() > query.page_size;
+    if (more) page.resize(query.page_size);
+    for (const BoxVoxel& v : page) {
+      VoxelToProto(tree, v.key, v.depth, v.node, state_->thresholds, reply->add_voxels());
     }
-    if (more) reply->set_next_page_token(EncodeToken(found.back().key));
+    if (more) reply->set_next_page_token(EncodePageToken(page.back().key));
     return Status::OK;
   };
   // A small box is a cheap call (at most kCheapBoxVoxels lookups); a larger one is admitted as
@@ -282,17 +133,9 @@ grpc::ServerUnaryReactor* MapService::CastRay(grpc::CallbackServerContext* conte
                                               const fusion::v1::CastRayRequest* request,
                                               fusion::v1::CastRayResponse* reply) {
   return Unary(context, state_, "CastRay", [&]() -> Status {
-    if (!FinitePoint(request->origin()) || !FinitePoint(request->direction())) {
-      return Status(StatusCode::INVALID_ARGUMENT, "origin and direction must be finite");
-    }
+    if (Status checked = CheckCastRay(*request); !checked.ok()) return checked;
     const Eigen::Vector3d origin = FromProto(request->origin());
     const Eigen::Vector3d direction = FromProto(request->direction());
-    if (direction.norm() < 1e-9) {
-      return Status(StatusCode::INVALID_ARGUMENT, "direction must not be zero");
-    }
-    if (!(request->max_range_m() > 0.0 && request->max_range_m() <= kMaxRayRangeM)) {
-      return Status(StatusCode::INVALID_ARGUMENT, "max_range_m must lie in (0, 1000]");
-    }
     const auto snapshot = state_->hub->Current();
     const octomap::OcTree& tree = *snapshot->tree;
     octomap::OcTreeKey key;
@@ -317,28 +160,7 @@ grpc::ServerUnaryReactor* MapService::FindPlanes(grpc::CallbackServerContext* co
                                                  const fusion::v1::FindPlanesRequest* request,
                                                  fusion::v1::FindPlanesResponse* reply) {
   return Heavy(context, state_, "FindPlanes", [this, context, request, reply]() -> Status {
-    if (request->has_region_min() != request->has_region_max()) {
-      return Status(StatusCode::INVALID_ARGUMENT, "give both region_min and region_max or none");
-    }
-    if (!FinitePoint(request->region_min()) || !FinitePoint(request->region_max()) ||
-        (FromProto(request->region_min()).array() > FromProto(request->region_max()).array())
-            .any()) {
-      return Status(StatusCode::INVALID_ARGUMENT, "region must be finite with min <= max");
-    }
-    if (request->max_planes() > kMaxPlanes) {
-      return Status(StatusCode::RESOURCE_EXHAUSTED, "max_planes is limited to 64");
-    }
-    if (!(request->min_probability() >= 0.0 && request->min_probability() < 1.0)) {
-      return Status(StatusCode::INVALID_ARGUMENT, "min_probability must lie in [0, 1)");
-    }
-    if (!(request->angle_step_deg() >= 0.0 && request->angle_step_deg() <= 45.0) ||
-        (request->angle_step_deg() > 0.0 && request->angle_step_deg() < 0.1)) {
-      return Status(StatusCode::INVALID_ARGUMENT, "angle_step_deg must lie in [0.1, 45]");
-    }
-    if (!(request->distance_step_m() >= 0.0 && request->distance_step_m() <= 10.0) ||
-        (request->distance_step_m() > 0.0 && request->distance_step_m() < 0.001)) {
-      return Status(StatusCode::INVALID_ARGUMENT, "distance_step_m must lie in [0.001, 10]");
-    }
+    if (Status checked = CheckFindPlanes(*request); !checked.ok()) return checked;
     const auto snapshot = state_->hub->Current();
     reply->set_map_version(snapshot->version);
     auto options = HoughOptionsFromProto(*request, snapshot->tree->getResolution());
@@ -401,9 +223,7 @@ grpc::ServerUnaryReactor* MapService::InspectBeam(grpc::CallbackServerContext* c
                                                   const fusion::v1::InspectBeamRequest* request,
                                                   fusion::v1::InspectBeamResponse* reply) {
   return Unary(context, state_, "InspectBeam", [&] {
-    if (request->sensor_id().empty()) {
-      return Status(StatusCode::INVALID_ARGUMENT, "sensor_id must be given");
-    }
+    if (Status checked = CheckInspectBeam(*request); !checked.ok()) return checked;
     BeamInspection beam;
     const auto lookup = state_->worker->InspectBeam(
         request->sensor_id(),
@@ -464,9 +284,8 @@ grpc::ServerWriteReactor<fusion::v1::SnapshotChunk>* MapService::GetSnapshot(
         Status(StatusCode::UNAVAILABLE, "fusiond is shutting down"));
   }
   try {
-    if (!fusion::v1::GetSnapshotRequest::Format_IsValid(request->format())) {
-      return new ErrorWriter<fusion::v1::SnapshotChunk>(
-          Status(StatusCode::INVALID_ARGUMENT, "format: unknown value"));
+    if (Status checked = CheckGetSnapshot(*request); !checked.ok()) {
+      return new ErrorWriter<fusion::v1::SnapshotChunk>(checked);
     }
     std::optional<CountedSlot> slot;
     if (Status admitted = AdmitHeavy(state_, "GetSnapshot", &slot); !admitted.ok()) {
