@@ -420,22 +420,7 @@ TEST_F(FusiondServiceTest, SnapshotFailuresShowInStatsHealthAndTheExitCode) {
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 1);
 }
 
-grpc::StatusCode QueryPointsStatus(v1::FusionMap::Stub& stub, const v1::QueryPointsRequest& r) {
-  grpc::ClientContext context;
-  context.set_deadline(In(5s));
-  v1::QueryPointsResponse reply;
-  return stub.QueryPoints(&context, r, &reply).error_code();
-}
-
-grpc::StatusCode QueryBoxStatus(v1::FusionMap::Stub& stub, const v1::QueryBoxRequest& r,
-                                std::chrono::milliseconds deadline = 5000ms) {
-  grpc::ClientContext context;
-  context.set_deadline(In(deadline));
-  v1::QueryBoxResponse reply;
-  return stub.QueryBox(&context, r, &reply).error_code();
-}
-
-TEST_F(FusiondServiceTest, MalformedCloudsAndBadRequestsAreRejectedWhileServing) {
+TEST_F(FusiondServiceTest, MalformedCloudsAreRejectedWhileServing) {
   auto fusiond = Start();
   ASSERT_TRUE(fusiond);
   TestPublisher publisher(domain_);
@@ -509,60 +494,7 @@ TEST_F(FusiondServiceTest, MalformedCloudsAndBadRequestsAreRejectedWhileServing)
   ASSERT_EQ(stats.rejected_by_reason().count("unknown_sensor"), 1u);
   EXPECT_EQ(stats.rejected_by_reason().at("unknown_sensor"), 1u);
 
-  // Bad requests get the status code that fits.
-  v1::QueryPointsRequest nan_point;
-  *nan_point.add_points() = P({NAN, 0, 0});
-  EXPECT_EQ(QueryPointsStatus(*stub_, nan_point), grpc::StatusCode::INVALID_ARGUMENT);
-  v1::QueryPointsRequest too_many;
-  for (int i = 0; i < 1001; ++i) *too_many.add_points() = P({0, 0, 0});
-  EXPECT_EQ(QueryPointsStatus(*stub_, too_many), grpc::StatusCode::RESOURCE_EXHAUSTED);
-
-  v1::QueryBoxRequest box;
-  *box.mutable_min() = P({-100, -100, -100});
-  *box.mutable_max() = P({100, 100, 100});
-  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::RESOURCE_EXHAUSTED);
-  *box.mutable_min() = P({1, 0, 0});
-  *box.mutable_max() = P({0, 1, 1});
-  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::INVALID_ARGUMENT);
-  *box.mutable_min() = P({0, 0, 0});
-  box.set_page_token("garbage");
-  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::INVALID_ARGUMENT);
-  box.clear_page_token();
-  box.set_page_size(1u << 30);
-  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::RESOURCE_EXHAUSTED);
-  // A page of 50 000 unknown voxels (the configured page size) with a deadline too short to
-  // build it (the server checks the deadline while walking; the client would also give up on
-  // its own).
-  box.set_page_size(0);
-  box.add_states(v1::VOXEL_STATE_UNKNOWN);
-  *box.mutable_max() = P({4.95, 4.95, 3.95});
-  EXPECT_EQ(QueryBoxStatus(*stub_, box, 2ms), grpc::StatusCode::DEADLINE_EXCEEDED);
-  // The same box in pages of 1000 answers in time.
-  box.set_page_size(1000);
-  EXPECT_EQ(QueryBoxStatus(*stub_, box), grpc::StatusCode::OK);
-
-  {
-    grpc::ClientContext context;
-    context.set_deadline(In(5s));
-    v1::CastRayRequest ray;
-    *ray.mutable_direction() = P({0, 0, 0});
-    ray.set_max_range_m(1.0);
-    v1::CastRayResponse reply;
-    EXPECT_EQ(stub_->CastRay(&context, ray, &reply).error_code(),
-              grpc::StatusCode::INVALID_ARGUMENT);
-  }
-  for (const auto& [sensor, row] : {std::pair<std::string, unsigned>{"ghost", 0},
-                                    std::pair<std::string, unsigned>{"sr", kRows}}) {
-    grpc::ClientContext context;
-    context.set_deadline(In(5s));
-    v1::InspectBeamRequest request;
-    request.set_sensor_id(sensor);
-    request.set_row(row);
-    v1::InspectBeamResponse reply;
-    EXPECT_EQ(stub_->InspectBeam(&context, request, &reply).error_code(),
-              grpc::StatusCode::NOT_FOUND)
-        << sensor;
-  }
+  // Bad requests get the status code that fits: tests/unit/service/handlers_*_test.cc.
 
   // Still healthy and serving.
   auto health = grpc::health::v1::Health::NewStub(channel_);

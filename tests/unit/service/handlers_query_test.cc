@@ -122,6 +122,22 @@ TEST_F(HandlerTest, QueryBoxRefusesBadBoxesPagesAndTokens) {
   EXPECT_TRUE(QueryBox("max { x: 1 y: 1 z: 1 }", &reply).ok());
 }
 
+TEST_F(HandlerTest, QueryBoxChecksItsDeadlineWhileWalking) {
+  TearDown();
+  StartService("limits { max_voxels_per_page: 50000 }");
+  // A page of 50 000 unknown voxels (the configured page size) with a deadline too short to
+  // build it: the server checks the deadline while walking (the client would give up too).
+  const std::string box = "min { } max { x: 4.95 y: 4.95 z: 3.95 } states: VOXEL_STATE_UNKNOWN ";
+  v1::QueryBoxResponse reply;
+  EXPECT_EQ(Unary(&v1::FusionMap::Stub::QueryBox, Text<v1::QueryBoxRequest>(box), &reply, 2ms)
+                .error_code(),
+            StatusCode::DEADLINE_EXCEEDED);
+  // The same box in pages of 1000 answers in time.
+  ASSERT_TRUE(QueryBox(box + "page_size: 1000", &reply).ok());
+  EXPECT_EQ(reply.voxels_size(), 1000);
+  EXPECT_FALSE(reply.next_page_token().empty());
+}
+
 TEST_F(HandlerTest, CastRayStopsAtTheWall) {
   SeeWall(3);
   v1::CastRayResponse reply;
