@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -15,6 +16,8 @@
 namespace {
 
 using fusion::clients::Status;
+
+constexpr const char* kTool = "fusion-import";
 
 constexpr const char* kUsage = R"(fusion-import: convert recorded range data into a fusion recording
 
@@ -82,196 +85,247 @@ at that pose. Unorganized clouds (width = point count, height = 1).
   --period S            time between clouds in seconds (default 1)
 )";
 
-int Fail(const std::string& message) {
-  std::fprintf(stderr, "fusion-import: %s\n", message.c_str());
-  return 1;
-}
-
-int UsageError(const std::string& message, const std::string& sub) {
-  std::fprintf(stderr, "fusion-import %s: %s (see fusion-import %s --help)\n", sub.c_str(),
-               message.c_str(), sub.c_str());
-  return 2;
-}
-
 void PrintUsage(const char* text, const char* default_id) {
   std::fputs(text, stdout);
   std::printf(kCommonOptions, default_id);
 }
 
+struct Options {
+  std::string sub;                   // tum, pcd, graph or scan
+  const char* usage = nullptr;       // the subcommand's --help text
+  const char* default_id = nullptr;  // its default sensor id
+  std::string tool;                  // "fusion-import SUB", the name in usage errors
+  std::string output, sensor_id;
+  std::vector<std::string> inputs;
+  fusion::clients::TumOptions tum;
+  fusion::v1::RecordedPose pose;  // --pose: sensor (pcd) or scanner (scan) in the world
+  bool pose_given = false, ignore_viewpoint = false;
+  double start_time_s = 0, period_s = 1;  // stamps of pcd, graph and scan clouds
+};
+
+// argv[1]; returns the exit code when the tool is done already (no or an unknown subcommand,
+// --help).
+std::optional<int> ParseSubcommand(int argc, char** argv, Options* o) {
+  if (argc < 2) {
+    std::fputs(kUsage, stderr);
+    return fusion::clients::kExitUsage;
+  }
+  o->sub = argv[1];
+  if (fusion::clients::IsHelpFlag(o->sub) || o->sub == "help") {
+    return fusion::clients::PrintHelp(kUsage);
+  }
+  if (o->sub == "tum") o->usage = kTumUsage, o->default_id = "tum";
+  if (o->sub == "pcd") o->usage = kPcdUsage, o->default_id = "pcd";
+  if (o->sub == "graph") o->usage = kGraphUsage, o->default_id = "scanner";
+  if (o->sub == "scan") o->usage = kScanUsage, o->default_id = "scanner";
+  if (o->usage == nullptr) {
+    std::fprintf(stderr, "fusion-import: unknown subcommand '%s'\n\n%s", o->sub.c_str(), kUsage);
+    return fusion::clients::kExitUsage;
+  }
+  o->tool = "fusion-import " + o->sub;
+  o->sensor_id = o->default_id;
+  o->pose.set_qw(1.0);
+  return std::nullopt;
+}
+
+// An option of `tum` with value `v`; false if `arg` is none.
+bool ApplyTumValue(const std::string& arg, const std::string& v, fusion::clients::TumOptions* tum,
+                   Status* s) {
+  double* const number = arg == "--fx"            ? &tum->fx_px
+                         : arg == "--fy"          ? &tum->fy_px
+                         : arg == "--cx"          ? &tum->cx_px
+                         : arg == "--cy"          ? &tum->cy_px
+                         : arg == "--depth-scale" ? &tum->depth_scale
+                                                  : nullptr;
+  if (number != nullptr) {
+    *s = fusion::clients::ParseDouble(arg, v, number);
+  } else if (arg == "--stride") {
+    std::uint64_t n = 0;
+    *s = fusion::clients::ParseUint(arg, v, &n);
+    tum->stride = static_cast<std::uint32_t>(n);
+    if (s->ok() && (n == 0 || n > 640)) *s = Status::Error("--stride must be 1..640");
+  } else if (arg == "--groundtruth") {
+    tum->groundtruth = v;
+  } else if (arg == "--max-frames") {
+    *s = fusion::clients::ParseUint(arg, v, &tum->max_frames);
+  } else {
+    return false;
+  }
+  return true;
+}
+
+// An option with value `v`; false if the subcommand has no option `arg`.
+bool ApplyValue(const std::string& arg, const std::string& v, Options* o, Status* s) {
+  if (arg == "-o" || arg == "--output") {
+    o->output = v;
+  } else if (arg == "--sensor-id") {
+    o->sensor_id = v;
+  } else if (o->sub == "tum") {
+    return ApplyTumValue(arg, v, &o->tum, s);
+  } else if ((o->sub == "pcd" || o->sub == "scan") && arg == "--pose") {
+    *s = fusion::clients::ParsePose(arg, v, &o->pose);
+    o->pose_given = true;
+  } else if (arg == "--start-time") {
+    *s = fusion::clients::ParseDouble(arg, v, &o->start_time_s);
+  } else if (arg == "--period") {
+    *s = fusion::clients::ParseDouble(arg, v, &o->period_s);
+    if (s->ok() && o->period_s < 0) *s = Status::Error("--period must not be negative");
+  } else {
+    return false;
+  }
+  return true;
+}
+
+// The options after the subcommand; returns the exit code when the tool is done already.
+std::optional<int> ParseOptions(int argc, char** argv, Options* o) {
+  for (int i = 2; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (fusion::clients::IsHelpFlag(arg)) {
+      PrintUsage(o->usage, o->default_id);
+      return fusion::clients::kExitOk;
+    }
+    if (o->sub == "pcd" && arg == "--ignore-viewpoint") {
+      o->ignore_viewpoint = true;
+      continue;
+    }
+    if (arg.size() <= 1 || arg[0] != '-') {
+      o->inputs.push_back(arg);
+      continue;
+    }
+    // Every other option takes a value, known or not ("--bogus x" is one unknown option).
+    std::string v;
+    if (!fusion::clients::TakeValue(argc, argv, &i, &v)) {
+      return fusion::clients::UsageError(o->tool, arg + " needs a value");
+    }
+    Status s;
+    if (!ApplyValue(arg, v, o, &s)) {
+      return fusion::clients::UsageError(o->tool, "unknown option " + arg);
+    }
+    if (!s.ok()) return fusion::clients::UsageError(o->tool, s.message());
+  }
+  if (o->output.empty()) return fusion::clients::UsageError(o->tool, "missing -o OUTPUT");
+  if (o->inputs.empty()) return fusion::clients::UsageError(o->tool, "missing input");
+  if ((o->sub == "tum" || o->sub == "graph") && o->inputs.size() != 1) {
+    return fusion::clients::UsageError(o->tool, "expects exactly one input");
+  }
+  if (o->sensor_id.empty())
+    return fusion::clients::UsageError(o->tool, "--sensor-id must not be empty");
+  return std::nullopt;
+}
+
+// Appends the imported clouds to the recording, numbering and stamping those the importer
+// leaves without identity (all but TUM's).
+class Sink {
+ public:
+  Sink(const Options& o, fusion::clients::RecordingWriter* writer) : o_(o), writer_(writer) {}
+  std::uint64_t points() const { return points_; }
+
+  // Sensor id, sequence number from 1, stamp start_time + period x (number - 1).
+  void Identify(fusion::v1::RecordedCloud* cloud, const std::string& origin) {
+    fusion::clients::SetIdentity(o_.sensor_id, sequence_ + 1,
+                                 o_.start_time_s + o_.period_s * sequence_, origin, cloud);
+    ++sequence_;
+  }
+
+  Status Append(fusion::v1::RecordedCloud&& cloud) {
+    points_ += cloud.xyz_f32le().size() / 12;
+    Status s = writer_->Append(cloud);
+    if (s.ok() && tty_) {
+      std::fprintf(stderr, "\rfusion-import: %llu clouds",
+                   static_cast<unsigned long long>(writer_->records_written()));
+    }
+    return s;
+  }
+
+ private:
+  const Options& o_;
+  fusion::clients::RecordingWriter* const writer_;
+  const bool tty_ = isatty(STDERR_FILENO) != 0;  // a running count on a terminal
+  std::uint64_t points_ = 0, sequence_ = 0;
+};
+
+Status ImportPcdFiles(const Options& o, Sink* sink) {
+  for (const auto& path : o.inputs) {
+    fusion::v1::RecordedCloud cloud;
+    if (Status s = fusion::clients::ReadPcd(path, &cloud, !o.ignore_viewpoint); !s.ok()) return s;
+    if (const double behind = fusion::clients::FractionBehindSensor(cloud); behind > 0.5) {
+      std::fprintf(stderr,
+                   "fusion-import: warning: %s: %.0f%% of the points lie behind the sensor "
+                   "(z < 0)%s\n",
+                   path.c_str(), 100 * behind,
+                   o.ignore_viewpoint ? "" : "; if its VIEWPOINT is wrong, use --ignore-viewpoint");
+    }
+    if (o.pose_given) {
+      const auto& T = cloud.t_world_sensor();
+      if (!(T.tx() == 0 && T.ty() == 0 && T.tz() == 0 && T.qw() == 1.0)) {
+        return Status::Error(path + ": has a non-identity VIEWPOINT; drop --pose to use it");
+      }
+      *cloud.mutable_t_world_sensor() = o.pose;
+    }
+    sink->Identify(&cloud, path);
+    if (Status s = sink->Append(std::move(cloud)); !s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+// graph and scan: several clouds a file.
+Status ImportMultiCloudFiles(const Options& o, Sink* sink) {
+  for (const auto& path : o.inputs) {
+    std::vector<fusion::v1::RecordedCloud> clouds;
+    Status s = o.sub == "graph" ? fusion::clients::ReadScanGraph(path, &clouds)
+                                : fusion::clients::ReadXyzScan(path, o.pose, &clouds);
+    if (!s.ok()) return s;
+    for (auto& cloud : clouds) {
+      sink->Identify(&cloud, path);
+      if (s = sink->Append(std::move(cloud)); !s.ok()) return s;
+    }
+  }
+  return Status::Ok();
+}
+
+Status Import(Options* o, Sink* sink) {
+  if (o->sub == "tum") {
+    o->tum.directory = o->inputs[0];
+    o->tum.sensor_id = o->sensor_id;
+    return fusion::clients::ImportTum(o->tum, [sink](fusion::v1::RecordedCloud&& cloud) {
+      return sink->Append(std::move(cloud));
+    });
+  }
+  if (o->sub == "pcd") return ImportPcdFiles(*o, sink);
+  return ImportMultiCloudFiles(*o, sink);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::fputs(kUsage, stderr);
-    return 2;
-  }
-  const std::string sub = argv[1];
-  if (sub == "--help" || sub == "-h" || sub == "help") {
-    std::fputs(kUsage, stdout);
-    return 0;
-  }
-  const char* usage = nullptr;
-  const char* default_id = nullptr;
-  if (sub == "tum") usage = kTumUsage, default_id = "tum";
-  if (sub == "pcd") usage = kPcdUsage, default_id = "pcd";
-  if (sub == "graph") usage = kGraphUsage, default_id = "scanner";
-  if (sub == "scan") usage = kScanUsage, default_id = "scanner";
-  if (usage == nullptr) {
-    std::fprintf(stderr, "fusion-import: unknown subcommand '%s'\n\n%s", sub.c_str(), kUsage);
-    return 2;
-  }
+  Options o;
+  if (const auto done = ParseSubcommand(argc, argv, &o)) return *done;
+  if (const auto done = ParseOptions(argc, argv, &o)) return *done;
 
-  std::string output, sensor_id = default_id;
-  std::vector<std::string> inputs;
-  fusion::clients::TumOptions tum;
-  fusion::v1::RecordedPose pose;
-  pose.set_qw(1.0);
-  bool pose_given = false, ignore_viewpoint = false;
-  double start_time_s = 0, period_s = 1;
-  for (int i = 2; i < argc; ++i) {
-    const std::string arg = argv[i];
-    const auto value = [&](std::string* out) {
-      if (i + 1 >= argc) return false;
-      *out = argv[++i];
-      return true;
-    };
-    std::string v;
-    Status s;
-    std::uint64_t n = 0;
-    if (arg == "--help" || arg == "-h") {
-      PrintUsage(usage, default_id);
-      return 0;
-    } else if (sub == "pcd" && arg == "--ignore-viewpoint") {
-      ignore_viewpoint = true;
-    } else if (arg.size() > 1 && arg[0] == '-' && !value(&v)) {
-      return UsageError(arg + " needs a value", sub);
-    } else if (arg == "-o" || arg == "--output") {
-      output = v;
-    } else if (arg == "--sensor-id") {
-      sensor_id = v;
-    } else if (sub == "tum" && arg == "--stride") {
-      s = fusion::clients::ParseUint(arg, v, &n);
-      tum.stride = static_cast<std::uint32_t>(n);
-      if (s.ok() && (n == 0 || n > 640)) s = Status::Error("--stride must be 1..640");
-    } else if (sub == "tum" && arg == "--fx") {
-      s = fusion::clients::ParseDouble(arg, v, &tum.fx_px);
-    } else if (sub == "tum" && arg == "--fy") {
-      s = fusion::clients::ParseDouble(arg, v, &tum.fy_px);
-    } else if (sub == "tum" && arg == "--cx") {
-      s = fusion::clients::ParseDouble(arg, v, &tum.cx_px);
-    } else if (sub == "tum" && arg == "--cy") {
-      s = fusion::clients::ParseDouble(arg, v, &tum.cy_px);
-    } else if (sub == "tum" && arg == "--depth-scale") {
-      s = fusion::clients::ParseDouble(arg, v, &tum.depth_scale);
-    } else if (sub == "tum" && arg == "--groundtruth") {
-      tum.groundtruth = v;
-    } else if (sub == "tum" && arg == "--max-frames") {
-      s = fusion::clients::ParseUint(arg, v, &tum.max_frames);
-    } else if ((sub == "pcd" || sub == "scan") && arg == "--pose") {
-      s = fusion::clients::ParsePose(arg, v, &pose);
-      pose_given = true;
-    } else if (sub != "tum" && arg == "--start-time") {
-      s = fusion::clients::ParseDouble(arg, v, &start_time_s);
-    } else if (sub != "tum" && arg == "--period") {
-      s = fusion::clients::ParseDouble(arg, v, &period_s);
-      if (s.ok() && period_s < 0) s = Status::Error("--period must not be negative");
-    } else if (arg.size() > 1 && arg[0] == '-') {
-      return UsageError("unknown option " + arg, sub);
-    } else {
-      inputs.push_back(arg);
-    }
-    if (!s.ok()) return UsageError(s.message(), sub);
-  }
-  if (output.empty()) return UsageError("missing -o OUTPUT", sub);
-  if (inputs.empty()) return UsageError("missing input", sub);
-  if ((sub == "tum" || sub == "graph") && inputs.size() != 1) {
-    return UsageError("expects exactly one input", sub);
-  }
-  if (sensor_id.empty()) return UsageError("--sensor-id must not be empty", sub);
-
-  std::string source = sub + ":";
-  for (const auto& in : inputs) source += " " + in;
+  std::string source = o.sub + ":";
+  for (const auto& in : o.inputs) source += " " + in;
   std::unique_ptr<fusion::clients::RecordingWriter> writer;
-  if (Status s =
-          fusion::clients::RecordingWriter::Create(output, "fusion-import " + sub, source, &writer);
+  if (Status s = fusion::clients::RecordingWriter::Create(o.output, o.tool, source, &writer);
       !s.ok()) {
-    return Fail(s.message());
+    return fusion::clients::Fail(kTool, s.message());
   }
-  std::uint64_t points = 0;
-  const bool tty = isatty(STDERR_FILENO) != 0;
-  const auto append = [&](fusion::v1::RecordedCloud&& cloud) {
-    points += cloud.xyz_f32le().size() / 12;
-    Status s = writer->Append(cloud);
-    if (s.ok() && tty) {
-      std::fprintf(stderr, "\rfusion-import: %llu clouds",
-                   static_cast<unsigned long long>(writer->records_written()));
-    }
-    return s;
-  };
-  Status status;
-  std::uint64_t sequence = 0;
-  const auto identify = [&](fusion::v1::RecordedCloud* cloud, const std::string& origin) {
-    fusion::clients::SetIdentity(sensor_id, sequence + 1, start_time_s + period_s * sequence,
-                                 origin, cloud);
-    ++sequence;
-  };
-  if (sub == "tum") {
-    tum.directory = inputs[0];
-    tum.sensor_id = sensor_id;
-    status = fusion::clients::ImportTum(tum, append);
-  } else if (sub == "pcd") {
-    for (const auto& path : inputs) {
-      fusion::v1::RecordedCloud cloud;
-      status = fusion::clients::ReadPcd(path, &cloud, !ignore_viewpoint);
-      if (!status.ok()) break;
-      if (const double behind = fusion::clients::FractionBehindSensor(cloud); behind > 0.5) {
-        std::fprintf(stderr,
-                     "fusion-import: warning: %s: %.0f%% of the points lie behind the sensor "
-                     "(z < 0)%s\n",
-                     path.c_str(), 100 * behind,
-                     ignore_viewpoint ? "" : "; if its VIEWPOINT is wrong, use --ignore-viewpoint");
-      }
-      if (pose_given) {
-        if (!(cloud.t_world_sensor().tx() == 0 && cloud.t_world_sensor().ty() == 0 &&
-              cloud.t_world_sensor().tz() == 0 && cloud.t_world_sensor().qw() == 1.0)) {
-          status = Status::Error(path + ": has a non-identity VIEWPOINT; drop --pose to use it");
-          break;
-        }
-        *cloud.mutable_t_world_sensor() = pose;
-      }
-      identify(&cloud, path);
-      status = append(std::move(cloud));
-      if (!status.ok()) break;
-    }
-  } else {
-    for (const auto& path : inputs) {
-      std::vector<fusion::v1::RecordedCloud> clouds;
-      status = sub == "graph" ? fusion::clients::ReadScanGraph(path, &clouds)
-                              : fusion::clients::ReadXyzScan(path, pose, &clouds);
-      if (!status.ok()) break;
-      for (auto& cloud : clouds) {
-        identify(&cloud, path);
-        status = append(std::move(cloud));
-        if (!status.ok()) break;
-      }
-      if (!status.ok()) break;
-    }
-  }
-  if (tty && writer->records_written() > 0) std::fputc('\n', stderr);
+  Sink sink(o, writer.get());
+  const Status status = Import(&o, &sink);
+  if (isatty(STDERR_FILENO) != 0 && writer->records_written() > 0) std::fputc('\n', stderr);
   const Status closed = writer->Close();
   if (!status.ok() && writer->records_written() == 0) {
-    std::remove(output.c_str());  // nothing worth keeping
-    return Fail(status.message());
+    std::remove(o.output.c_str());  // nothing worth keeping
+    return fusion::clients::Fail(kTool, status.message());
   }
   if (!status.ok()) {
-    std::fprintf(stderr, "fusion-import: %s\n", status.message().c_str());
-    std::fprintf(stderr, "fusion-import: %s keeps the %llu clouds imported before the error\n",
-                 output.c_str(), static_cast<unsigned long long>(writer->records_written()));
-    return 1;
+    fusion::clients::Fail(kTool, status.message());
+    return fusion::clients::Fail(kTool, o.output + " keeps the " +
+                                            std::to_string(writer->records_written()) +
+                                            " clouds imported before the error");
   }
-  if (!closed.ok()) return Fail(closed.message());
+  if (!closed.ok()) return fusion::clients::Fail(kTool, closed.message());
   std::printf("imported %llu clouds (%llu points) into %s\n",
               static_cast<unsigned long long>(writer->records_written()),
-              static_cast<unsigned long long>(points), output.c_str());
-  return 0;
+              static_cast<unsigned long long>(sink.points()), o.output.c_str());
+  return fusion::clients::kExitOk;
 }

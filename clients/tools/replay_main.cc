@@ -2,13 +2,11 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
-#include <csignal>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
-#include <thread>
 
 #include "fusion/clients/cli.h"
 #include "fusion/clients/crc32.h"
@@ -19,6 +17,8 @@ namespace {
 
 using fusion::clients::Status;
 using Clock = std::chrono::steady_clock;
+
+constexpr const char* kTool = "fusion-replay";
 
 constexpr const char* kUsage = R"(fusion-replay: publish a recording on the DDS bus
 
@@ -44,14 +44,6 @@ published; the exit status is then 1.
 Transport: CYCLONEDDS_URI if set, else a loopback-only configuration.
 )";
 
-std::atomic<bool> g_stop{false};
-void OnSignal(int) { g_stop = true; }
-
-int UsageError(const std::string& message) {
-  std::fprintf(stderr, "fusion-replay: %s (see fusion-replay --help)\n", message.c_str());
-  return 2;
-}
-
 std::string Describe(std::size_t i, const fusion::v1::RecordedCloud& c) {
   char text[512];
   const auto& T = c.t_world_sensor();
@@ -69,8 +61,7 @@ std::string Describe(std::size_t i, const fusion::v1::RecordedCloud& c) {
 int List(const std::string& path) {
   std::unique_ptr<fusion::clients::RecordingReader> reader;
   if (Status s = fusion::clients::RecordingReader::Open(path, &reader); !s.ok()) {
-    std::fprintf(stderr, "fusion-replay: %s\n", s.message().c_str());
-    return 1;
+    return fusion::clients::Fail(kTool, s.message());
   }
   std::printf("# %s: written by '%s' from '%s', %zu records, %s\n", path.c_str(),
               reader->header().writer().c_str(), reader->header().source().c_str(), reader->size(),
@@ -78,202 +69,256 @@ int List(const std::string& path) {
   fusion::v1::RecordedCloud cloud;
   for (std::size_t i = 0; i < reader->size(); ++i) {
     if (Status s = reader->Read(i, &cloud); !s.ok()) {
-      std::fprintf(stderr, "fusion-replay: %s: %s\n", path.c_str(), s.message().c_str());
-      return 1;
+      return fusion::clients::Fail(kTool, path + ": " + s.message());
     }
     std::printf("%s\n", Describe(i, cloud).c_str());
   }
   if (!reader->tail_error().ok()) {
-    std::fprintf(stderr, "fusion-replay: %s: %s\n", path.c_str(),
-                 reader->tail_error().message().c_str());
-    return 1;
+    return fusion::clients::Fail(kTool, path + ": " + reader->tail_error().message());
   }
-  return 0;
+  return fusion::clients::kExitOk;
+}
+
+struct Options {
+  std::string path, topic = fusion::clients::kPointsTopic;
+  std::uint64_t domain = 0, wait_readers = 1;
+  double rate = 1.0, wait_timeout_s = 10;  // rate: pace multiplier
+  bool fast = false, loop = false, restamp = false, quiet = false, list = false;
+  fusion::clients::PointsQos qos;
+};
+
+// The option `arg` that takes value `v`.
+Status ApplyValue(const std::string& arg, const std::string& v, Options* o) {
+  Status s;
+  if (arg == "--topic") o->topic = v;
+  if (arg == "--domain") s = fusion::clients::ParseDomain(arg, v, &o->domain);
+  if (arg == "--wait-readers") s = fusion::clients::ParseUint(arg, v, &o->wait_readers);
+  if (arg == "--rate") {
+    s = fusion::clients::ParseDouble(arg, v, &o->rate);
+    if (s.ok() && o->rate <= 0) s = Status::Error("--rate must be positive");
+  }
+  if (arg == "--wait-timeout") {
+    s = fusion::clients::ParseDouble(arg, v, &o->wait_timeout_s);
+    if (s.ok() && o->wait_timeout_s < 0) s = Status::Error("--wait-timeout must not be negative");
+  }
+  return s;
+}
+
+// A flag without a value; false if `arg` is none.
+bool ApplyFlag(const std::string& arg, Options* o) {
+  bool* const flag = arg == "--fast"       ? &o->fast
+                     : arg == "--loop"     ? &o->loop
+                     : arg == "--restamp"  ? &o->restamp
+                     : arg == "--reliable" ? &o->qos.reliable
+                     : arg == "--quiet"    ? &o->quiet
+                     : arg == "--list"     ? &o->list
+                                           : nullptr;
+  if (flag != nullptr) *flag = true;
+  return flag != nullptr;
+}
+
+// Returns the exit code when the tool is done already (--help, a bad command line).
+std::optional<int> ParseFlags(int argc, char** argv, Options* o) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    std::string v;
+    Status s;
+    if (fusion::clients::IsHelpFlag(arg)) return fusion::clients::PrintHelp(kUsage);
+    if (ApplyFlag(arg, o)) continue;
+    if (arg == "--domain" || arg == "--topic" || arg == "--rate" || arg == "--wait-readers" ||
+        arg == "--wait-timeout") {
+      if (!fusion::clients::TakeValue(argc, argv, &i, &v)) {
+        return fusion::clients::UsageError(kTool, arg + " needs a value");
+      }
+      s = ApplyValue(arg, v, o);
+    } else if (!arg.empty() && arg[0] == '-') {
+      return fusion::clients::UsageError(kTool, "unknown option " + arg);
+    } else if (o->path.empty()) {
+      o->path = arg;
+    } else {
+      return fusion::clients::UsageError(kTool, "more than one recording given");
+    }
+    if (!s.ok()) return fusion::clients::UsageError(kTool, s.message());
+  }
+  if (o->path.empty()) return fusion::clients::UsageError(kTool, "missing RECORDING");
+  return std::nullopt;
+}
+
+// The writer, once the readers asked for have matched (or the wait timed out).
+Status CreateWriter(const Options& o, std::unique_ptr<fusion::clients::PointCloudWriter>* writer) {
+  if (Status s = fusion::clients::PointCloudWriter::Create(static_cast<std::uint32_t>(o.domain),
+                                                           o.topic, o.qos, writer);
+      !s.ok()) {
+    return Status::Error("cannot publish: " + s.message());
+  }
+  const auto timeout = std::chrono::milliseconds(static_cast<long>(o.wait_timeout_s * 1000));
+  if (o.wait_readers > 0 &&
+      !(*writer)->WaitForReaders(static_cast<std::uint32_t>(o.wait_readers), timeout)) {
+    std::fprintf(stderr, "fusion-replay: only %u of %llu readers after %.1f s; publishing anyway\n",
+                 (*writer)->matched_readers(), static_cast<unsigned long long>(o.wait_readers),
+                 o.wait_timeout_s);
+  }
+  return Status::Ok();
+}
+
+// When each record is due (seconds, recording time) and how loops renumber the records.
+class Pacing {
+ public:
+  explicit Pacing(const fusion::clients::RecordingReader& reader) : reader_(reader) {
+    for (std::size_t i = 0; i < reader.size(); ++i) {
+      have_receive_times_ = have_receive_times_ && reader.entry(i).receive_time_unix_ns() != 0;
+      max_sequence_ = std::max(max_sequence_, reader.entry(i).sequence_number());
+    }
+  }
+  // Paced by the receive times when the recording has them, else by the stamps.
+  double RecordTimeS(std::size_t i) const {
+    const auto& e = reader_.entry(i);
+    return have_receive_times_ ? 1e-9 * static_cast<double>(e.receive_time_unix_ns())
+                               : fusion::clients::SecondsFromTime(e.stamp());
+  }
+  // Sequence numbers keep increasing from loop to loop.
+  std::uint64_t SequenceOffset(std::uint64_t loop_index) const {
+    return loop_index * (max_sequence_ + 1);
+  }
+
+ private:
+  const fusion::clients::RecordingReader& reader_;
+  bool have_receive_times_ = true;
+  std::uint64_t max_sequence_ = 0;
+};
+
+// Progress on stderr: a bar on a terminal (every 100 ms), a line every 5 s otherwise.
+class Progress {
+ public:
+  Progress(const Options& o, std::size_t total)
+      : tty_(isatty(STDERR_FILENO) != 0), quiet_(o.quiet), loop_(o.loop), total_(total) {}
+  bool tty() const { return tty_; }
+  // After publishing record i of loop loop_index.
+  void Published(std::size_t i, std::uint64_t loop_index) {
+    const auto now = Clock::now();
+    if (!quiet_ &&
+        now - last_ >= (tty_ ? std::chrono::milliseconds(100) : std::chrono::milliseconds(5000))) {
+      Print(i + 1, loop_index, false);
+      last_ = now;
+    }
+    if (i + 1 == total_ && !quiet_) Print(total_, loop_index, !loop_);
+  }
+
+ private:
+  void Print(std::size_t done, std::uint64_t loop_index, bool final_line) const {
+    const double elapsed_s = std::chrono::duration<double>(Clock::now() - start_).count();
+    if (tty_) {
+      constexpr int kBarWidth = 30;
+      const int filled = static_cast<int>(kBarWidth * done / total_);
+      std::string bar(static_cast<std::size_t>(filled), '#');
+      bar.resize(kBarWidth, '.');
+      std::fprintf(stderr, "\r[%s] %zu/%zu clouds%s  %.1f s%s", bar.c_str(), done, total_,
+                   loop_ ? (" loop " + std::to_string(loop_index + 1)).c_str() : "", elapsed_s,
+                   final_line ? "\n" : "");
+    } else {
+      std::fprintf(stderr, "fusion-replay: %zu/%zu clouds%s, %.1f s\n", done, total_,
+                   loop_ ? (" (loop " + std::to_string(loop_index + 1) + ")").c_str() : "",
+                   elapsed_s);
+    }
+  }
+
+  const bool tty_, quiet_, loop_;
+  const std::size_t total_;
+  const Clock::time_point start_ = Clock::now();
+  Clock::time_point last_ = start_ - std::chrono::seconds(10);
+};
+
+struct ReplayResult {
+  std::uint64_t published = 0;
+  Status broken;              // a record that could not be read ends the replay
+  bool write_failed = false;  // the bus refused a cloud (reported already)
+};
+
+// One pass through the recording, paced unless --fast; false when the replay must end.
+bool ReplayOnce(const Options& o, const Pacing& pacing, std::uint64_t loop_index,
+                fusion::clients::RecordingReader* reader, fusion::clients::PointCloudWriter* writer,
+                Progress* progress, ReplayResult* result) {
+  const auto loop_start = Clock::now();
+  const double t0_s = pacing.RecordTimeS(0);
+  fusion::v1::RecordedCloud cloud;
+  for (std::size_t i = 0; i < reader->size() && !fusion::clients::StopRequested(); ++i) {
+    if (!o.fast) {
+      const double offset_s = std::max(0.0, (pacing.RecordTimeS(i) - t0_s) / o.rate);
+      const auto due = loop_start + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(offset_s));
+      if (!fusion::clients::SleepUntilOrStop(due)) break;
+    }
+    if (Status s = reader->Read(i, &cloud); !s.ok()) {
+      result->broken = s;
+      return false;
+    }
+    cloud.set_sequence_number(cloud.sequence_number() + pacing.SequenceOffset(loop_index));
+    if (o.restamp)
+      *cloud.mutable_stamp() = fusion::clients::TimeFromUnixNs(fusion::clients::UnixNowNs());
+    if (Status s = writer->Write(cloud); !s.ok()) {
+      std::fprintf(stderr, "\nfusion-replay: %s\n", s.message().c_str());
+      result->write_failed = true;
+      return false;
+    }
+    ++result->published;
+    progress->Published(i, loop_index);
+  }
+  return o.loop && reader->tail_error().ok();
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string path, topic = fusion::clients::kPointsTopic;
-  std::uint64_t domain = 0, wait_readers = 1;
-  double rate = 1.0, wait_timeout_s = 10;
-  bool fast = false, loop = false, restamp = false, quiet = false, list = false;
-  fusion::clients::PointsQos qos;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    std::string v;
-    Status s;
-    if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else if (arg == "--fast") {
-      fast = true;
-    } else if (arg == "--loop") {
-      loop = true;
-    } else if (arg == "--restamp") {
-      restamp = true;
-    } else if (arg == "--reliable") {
-      qos.reliable = true;
-    } else if (arg == "--quiet") {
-      quiet = true;
-    } else if (arg == "--list") {
-      list = true;
-    } else if (arg == "--domain" || arg == "--topic" || arg == "--rate" ||
-               arg == "--wait-readers" || arg == "--wait-timeout") {
-      if (i + 1 >= argc) return UsageError(arg + " needs a value");
-      v = argv[++i];
-      if (arg == "--topic") topic = v;
-      if (arg == "--domain") {
-        s = fusion::clients::ParseUint(arg, v, &domain);
-        if (s.ok() && domain > 230) s = Status::Error("--domain must be 0..230");
-      }
-      if (arg == "--wait-readers") s = fusion::clients::ParseUint(arg, v, &wait_readers);
-      if (arg == "--rate") {
-        s = fusion::clients::ParseDouble(arg, v, &rate);
-        if (s.ok() && rate <= 0) s = Status::Error("--rate must be positive");
-      }
-      if (arg == "--wait-timeout") {
-        s = fusion::clients::ParseDouble(arg, v, &wait_timeout_s);
-        if (s.ok() && wait_timeout_s < 0) s = Status::Error("--wait-timeout must not be negative");
-      }
-    } else if (!arg.empty() && arg[0] == '-') {
-      return UsageError("unknown option " + arg);
-    } else if (path.empty()) {
-      path = arg;
-    } else {
-      return UsageError("more than one recording given");
-    }
-    if (!s.ok()) return UsageError(s.message());
-  }
-  if (path.empty()) return UsageError("missing RECORDING");
-  if (list) return List(path);
+  Options o;
+  if (const auto done = ParseFlags(argc, argv, &o)) return *done;
+  if (o.list) return List(o.path);
 
   std::unique_ptr<fusion::clients::RecordingReader> reader;
-  if (Status s = fusion::clients::RecordingReader::Open(path, &reader); !s.ok()) {
-    std::fprintf(stderr, "fusion-replay: %s\n", s.message().c_str());
-    return 1;
+  if (Status s = fusion::clients::RecordingReader::Open(o.path, &reader); !s.ok()) {
+    return fusion::clients::Fail(kTool, s.message());
   }
   if (!reader->indexed()) {
-    std::fprintf(stderr, "fusion-replay: %s: %s; read sequentially (%zu records)\n", path.c_str(),
+    std::fprintf(stderr, "fusion-replay: %s: %s; read sequentially (%zu records)\n", o.path.c_str(),
                  reader->index_note().c_str(), reader->size());
   }
   const std::size_t total = reader->size();
   if (total == 0) {
-    std::fprintf(stderr, "fusion-replay: %s has no records\n", path.c_str());
-    return reader->tail_error().ok() ? 0 : 1;
+    std::fprintf(stderr, "fusion-replay: %s has no records\n", o.path.c_str());
+    return reader->tail_error().ok() ? fusion::clients::kExitOk : fusion::clients::kExitFailure;
   }
 
-  std::signal(SIGINT, OnSignal);
-  std::signal(SIGTERM, OnSignal);
+  fusion::clients::InstallStopHandlers();
   std::unique_ptr<fusion::clients::PointCloudWriter> writer;
-  if (Status s = fusion::clients::PointCloudWriter::Create(static_cast<std::uint32_t>(domain),
-                                                           topic, qos, &writer);
-      !s.ok()) {
-    std::fprintf(stderr, "fusion-replay: cannot publish: %s\n", s.message().c_str());
-    return 1;
-  }
-  if (wait_readers > 0 && !writer->WaitForReaders(static_cast<std::uint32_t>(wait_readers),
-                                                  std::chrono::milliseconds(
-                                                      static_cast<long>(wait_timeout_s * 1000)))) {
-    std::fprintf(stderr, "fusion-replay: only %u of %llu readers after %.1f s; publishing anyway\n",
-                 writer->matched_readers(), static_cast<unsigned long long>(wait_readers),
-                 wait_timeout_s);
-  }
+  if (Status s = CreateWriter(o, &writer); !s.ok())
+    return fusion::clients::Fail(kTool, s.message());
   std::printf("fusion-replay: publishing %zu clouds from %s on %s in domain %llu\n", total,
-              path.c_str(), topic.c_str(), static_cast<unsigned long long>(domain));
+              o.path.c_str(), o.topic.c_str(), static_cast<unsigned long long>(o.domain));
   std::fflush(stdout);
 
-  // Pace by the receive times when the recording has them, else by the stamps.
-  bool have_receive_times = true;
-  std::uint64_t max_sequence = 0;
-  for (std::size_t i = 0; i < total; ++i) {
-    have_receive_times = have_receive_times && reader->entry(i).receive_time_unix_ns() != 0;
-    max_sequence = std::max(max_sequence, reader->entry(i).sequence_number());
+  const Pacing pacing(*reader);
+  Progress progress(o, total);
+  ReplayResult result;
+  for (std::uint64_t loop_index = 0; !fusion::clients::StopRequested(); ++loop_index) {
+    if (!ReplayOnce(o, pacing, loop_index, reader.get(), writer.get(), &progress, &result)) break;
   }
-  const auto record_time_s = [&](std::size_t i) {
-    const auto& e = reader->entry(i);
-    return have_receive_times ? 1e-9 * static_cast<double>(e.receive_time_unix_ns())
-                              : fusion::clients::SecondsFromTime(e.stamp());
-  };
-
-  const bool tty = isatty(STDERR_FILENO) != 0;
-  const auto start = Clock::now();
-  auto last_progress = start - std::chrono::seconds(10);
-  std::uint64_t published = 0;
-  Status broken;
-  const auto progress = [&](std::size_t done, std::uint64_t loop_index, bool final_line) {
-    const double elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
-    if (tty) {
-      constexpr int kBarWidth = 30;
-      const int filled = static_cast<int>(kBarWidth * done / total);
-      std::string bar(static_cast<std::size_t>(filled), '#');
-      bar.resize(kBarWidth, '.');
-      std::fprintf(stderr, "\r[%s] %zu/%zu clouds%s  %.1f s%s", bar.c_str(), done, total,
-                   loop ? (" loop " + std::to_string(loop_index + 1)).c_str() : "", elapsed_s,
-                   final_line ? "\n" : "");
-    } else {
-      std::fprintf(stderr, "fusion-replay: %zu/%zu clouds%s, %.1f s\n", done, total,
-                   loop ? (" (loop " + std::to_string(loop_index + 1) + ")").c_str() : "",
-                   elapsed_s);
-    }
-  };
-
-  fusion::v1::RecordedCloud cloud;
-  std::uint64_t loop_index = 0;
-  for (; !g_stop; ++loop_index) {
-    const auto loop_start = Clock::now();
-    const double t0_s = record_time_s(0);
-    for (std::size_t i = 0; i < total && !g_stop; ++i) {
-      if (!fast) {
-        const double offset_s = std::max(0.0, (record_time_s(i) - t0_s) / rate);
-        const auto due = loop_start + std::chrono::duration_cast<Clock::duration>(
-                                          std::chrono::duration<double>(offset_s));
-        while (!g_stop && Clock::now() < due) {
-          std::this_thread::sleep_until(
-              std::min(due, Clock::now() + std::chrono::milliseconds(100)));
-        }
-        if (g_stop) break;
-      }
-      if (Status s = reader->Read(i, &cloud); !s.ok()) {
-        broken = s;
-        break;
-      }
-      cloud.set_sequence_number(cloud.sequence_number() + loop_index * (max_sequence + 1));
-      if (restamp) {
-        const std::int64_t now_ns = fusion::clients::UnixNowNs();
-        cloud.mutable_stamp()->set_sec(static_cast<std::int32_t>(now_ns / 1000000000));
-        cloud.mutable_stamp()->set_nanosec(static_cast<std::uint32_t>(now_ns % 1000000000));
-      }
-      if (Status s = writer->Write(cloud); !s.ok()) {
-        std::fprintf(stderr, "\nfusion-replay: %s\n", s.message().c_str());
-        return 1;
-      }
-      ++published;
-      const auto now = Clock::now();
-      if (!quiet && now - last_progress >=
-                        (tty ? std::chrono::milliseconds(100) : std::chrono::milliseconds(5000))) {
-        progress(i + 1, loop_index, false);
-        last_progress = now;
-      }
-      if (i + 1 == total && !quiet) progress(total, loop_index, !loop);
-    }
-    if (!broken.ok() || !loop) break;
-    if (!reader->tail_error().ok()) break;
-  }
-  if (qos.reliable) {
+  if (result.write_failed) return fusion::clients::kExitFailure;
+  if (o.qos.reliable) {
     if (Status s = writer->WaitForAcks(std::chrono::seconds(30)); !s.ok()) {
       std::fprintf(stderr, "fusion-replay: not every reader acknowledged: %s\n",
                    s.message().c_str());
     }
   }
-  if (tty && !quiet && (g_stop || !broken.ok())) std::fputc('\n', stderr);
-  if (broken.ok() && !reader->tail_error().ok()) broken = reader->tail_error();
-  if (!broken.ok()) {
-    std::fprintf(stderr, "fusion-replay: %s: %s; stopped after publishing %llu clouds\n",
-                 path.c_str(), broken.message().c_str(),
-                 static_cast<unsigned long long>(published));
-    return 1;
+  if (progress.tty() && !o.quiet && (fusion::clients::StopRequested() || !result.broken.ok())) {
+    std::fputc('\n', stderr);
   }
-  std::printf("fusion-replay: published %llu clouds\n", static_cast<unsigned long long>(published));
-  return 0;
+  if (result.broken.ok() && !reader->tail_error().ok()) result.broken = reader->tail_error();
+  if (!result.broken.ok()) {
+    std::fprintf(stderr, "fusion-replay: %s: %s; stopped after publishing %llu clouds\n",
+                 o.path.c_str(), result.broken.message().c_str(),
+                 static_cast<unsigned long long>(result.published));
+    return fusion::clients::kExitFailure;
+  }
+  std::printf("fusion-replay: published %llu clouds\n",
+              static_cast<unsigned long long>(result.published));
+  return fusion::clients::kExitOk;
 }

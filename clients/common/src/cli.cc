@@ -1,12 +1,71 @@
 #include "fusion/clients/cli.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cmath>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <sstream>
+#include <thread>
 #include <vector>
 
 namespace fusion::clients {
+
+namespace {
+
+// Lock-free, so setting it is async-signal-safe.
+std::atomic<bool> g_stop_requested{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
+
+void OnStopSignal(int) { g_stop_requested = true; }
+
+}  // namespace
+
+bool IsHelpFlag(const std::string& arg) { return arg == "--help" || arg == "-h"; }
+
+int PrintHelp(const char* usage) {
+  std::fputs(usage, stdout);
+  return kExitOk;
+}
+
+int UsageError(const std::string& tool, const std::string& message) {
+  std::fprintf(stderr, "%s: %s (see %s --help)\n", tool.c_str(), message.c_str(), tool.c_str());
+  return kExitUsage;
+}
+
+int Fail(const std::string& tool, const std::string& message) {
+  std::fprintf(stderr, "%s: %s\n", tool.c_str(), message.c_str());
+  return kExitFailure;
+}
+
+bool TakeValue(int argc, char** argv, int* i, std::string* value) {
+  if (*i + 1 >= argc) return false;
+  *value = argv[++*i];
+  return true;
+}
+
+void InstallStopHandlers() {
+  std::signal(SIGINT, OnStopSignal);
+  std::signal(SIGTERM, OnStopSignal);
+}
+
+bool StopRequested() { return g_stop_requested; }
+
+bool SleepUntilOrStop(std::chrono::steady_clock::time_point due) {
+  using Clock = std::chrono::steady_clock;
+  while (!StopRequested() && Clock::now() < due) {
+    std::this_thread::sleep_until(std::min(due, Clock::now() + std::chrono::milliseconds(100)));
+  }
+  return !StopRequested();
+}
+
+bool ParseFinite(const std::string& text, double* value) {
+  char* end = nullptr;
+  *value = std::strtod(text.c_str(), &end);
+  return !text.empty() && *end == '\0' && std::isfinite(*value);
+}
 
 Status ParseDouble(const std::string& flag, const std::string& text, double* value) {
   char* end = nullptr;
@@ -27,6 +86,12 @@ Status ParseUint(const std::string& flag, const std::string& text, std::uint64_t
     return Status::Error(flag + ": '" + text + "' is not a non-negative integer");
   }
   *value = v;
+  return Status::Ok();
+}
+
+Status ParseDomain(const std::string& flag, const std::string& text, std::uint64_t* domain) {
+  if (Status s = ParseUint(flag, text, domain); !s.ok()) return s;
+  if (*domain > 230) return Status::Error(flag + " must be 0..230");
   return Status::Ok();
 }
 
@@ -69,6 +134,13 @@ fusion::v1::RecordedTime TimeFromSeconds(double seconds) {
   }
   time.set_sec(static_cast<std::int32_t>(whole));
   time.set_nanosec(static_cast<std::uint32_t>(nanosec));
+  return time;
+}
+
+fusion::v1::RecordedTime TimeFromUnixNs(std::int64_t unix_ns) {
+  fusion::v1::RecordedTime time;
+  time.set_sec(static_cast<std::int32_t>(unix_ns / 1000000000));
+  time.set_nanosec(static_cast<std::uint32_t>(unix_ns % 1000000000));
   return time;
 }
 

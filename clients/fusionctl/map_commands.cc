@@ -1,0 +1,162 @@
+// fusionctl snapshot, render and watch: the map's contents, whole or as a stream of changes.
+#include <octomap/AbstractOcTree.h>
+#include <octomap/OcTree.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "fusionctl.h"
+#include "map_render.h"
+
+namespace fusionctl {
+namespace {
+
+// Fetches the whole snapshot; *version receives the map version.
+bool FetchSnapshot(Context& ctx, fusion::v1::GetSnapshotRequest::Format format, std::string* bytes,
+                   unsigned long long* version, int* rc) {
+  grpc::ClientContext context;
+  SetDeadline(&context, std::max(ctx.timeout_s, 60.0));
+  fusion::v1::GetSnapshotRequest request;
+  request.set_format(format);
+  auto reader = ctx.stub->GetSnapshot(&context, request);
+  fusion::v1::SnapshotChunk chunk;
+  while (reader->Read(&chunk)) {
+    if (chunk.offset() != bytes->size()) {
+      *rc = fusion::clients::Fail(kTool, "snapshot chunk out of order");
+      context.TryCancel();
+      return false;
+    }
+    bytes->append(chunk.data());
+    *version = chunk.map_version();
+    if (chunk.total_bytes() > 0 && isatty(2)) {
+      std::fprintf(stderr, "\rsnapshot: %zu / %llu bytes", bytes->size(),
+                   (unsigned long long)chunk.total_bytes());
+    }
+  }
+  if (isatty(2)) std::fprintf(stderr, "\n");
+  const auto status = reader->Finish();
+  if (!status.ok()) {
+    *rc = Failed(ctx, status);
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+int Snapshot(Context& ctx, const Args& args) {
+  if (args.positional.size() != 1) return Usage("snapshot needs FILE.bt or FILE.ot");
+  const std::string& path = args.positional[0];
+  const bool bt = path.size() > 3 && path.compare(path.size() - 3, 3, ".bt") == 0;
+  const bool ot = path.size() > 3 && path.compare(path.size() - 3, 3, ".ot") == 0;
+  if (!bt && !ot) return Usage("snapshot file must end in .bt or .ot");
+  std::string bytes;
+  unsigned long long version = 0;
+  int rc = 0;
+  if (!FetchSnapshot(ctx,
+                     bt ? fusion::v1::GetSnapshotRequest::FORMAT_BT
+                        : fusion::v1::GetSnapshotRequest::FORMAT_OT,
+                     &bytes, &version, &rc)) {
+    return rc;
+  }
+  std::ofstream out(path, std::ios::binary);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  if (!out.flush()) {
+    return fusion::clients::Fail(kTool, "cannot write '" + path + "'");
+  }
+  std::printf("wrote %s: %zu bytes, map version %llu\n", path.c_str(), bytes.size(), version);
+  return fusion::clients::kExitOk;
+}
+
+int Render(Context& ctx, const Args& args) {
+  if (args.positional.size() != 1) return Usage("render needs FILE.png");
+  fusion::render::RenderOptions options;
+  const std::string color = args.Get("--color", "height");
+  if (color == "height")
+    options.color_by = fusion::render::ColorBy::kHeight;
+  else if (color == "probability")
+    options.color_by = fusion::render::ColorBy::kProbability;
+  else
+    return Usage("--color takes height or probability");
+  if (!args.Get("--azimuth").empty() &&
+      !fusion::clients::ParseFinite(args.Get("--azimuth"), &options.view_azimuth_deg)) {
+    return Usage("bad --azimuth");
+  }
+  if (!args.Get("--elevation").empty() &&
+      !fusion::clients::ParseFinite(args.Get("--elevation"), &options.view_elevation_deg)) {
+    return Usage("bad --elevation");
+  }
+  if (!args.Get("--min-probability").empty() &&
+      !fusion::clients::ParseFinite(args.Get("--min-probability"), &options.min_probability)) {
+    return Usage("bad --min-probability");
+  }
+  if (!args.Get("--size").empty() && std::sscanf(args.Get("--size").c_str(), "%dx%d",
+                                                 &options.width_px, &options.height_px) != 2) {
+    return Usage("--size takes WxH");
+  }
+  if (options.width_px <= 0 || options.height_px <= 0 || options.width_px > 8192 ||
+      options.height_px > 8192) {
+    return Usage("--size must be between 1x1 and 8192x8192");
+  }
+  std::string bytes;
+  unsigned long long version = 0;
+  int rc = 0;
+  if (!FetchSnapshot(ctx, fusion::v1::GetSnapshotRequest::FORMAT_OT, &bytes, &version, &rc)) {
+    return rc;
+  }
+  std::istringstream in(bytes);
+  std::unique_ptr<octomap::AbstractOcTree> tree(octomap::AbstractOcTree::read(in));
+  auto* octree = dynamic_cast<octomap::OcTree*>(tree.get());
+  if (!octree) {
+    return fusion::clients::Fail(kTool, "the snapshot is not an OcTree");
+  }
+  const auto image = fusion::render::RenderOccupied(*octree, options);
+  std::string error;
+  if (!fusion::render::WritePng(args.positional[0], image, &error)) {
+    return fusion::clients::Fail(kTool, error);
+  }
+  std::printf("wrote %s: %dx%d, %zu occupied voxels drawn, map version %llu\n",
+              args.positional[0].c_str(), image.width, image.height, image.voxels_drawn, version);
+  return fusion::clients::kExitOk;
+}
+
+int Watch(Context& ctx, const Args& args) {
+  fusion::v1::StreamUpdatesRequest request;
+  request.set_since_version(std::strtoull(args.Get("--since", "0").c_str(), nullptr, 10));
+  const bool versions_only = args.Has("--versions-only");
+  request.set_versions_only(versions_only);
+  const long count = std::atol(args.Get("--count", "0").c_str());
+  grpc::ClientContext context;
+  auto reader = ctx.stub->StreamUpdates(&context, request);
+  fusion::v1::MapUpdate update;
+  long versions = 0;
+  std::size_t voxels = 0;
+  while (reader->Read(&update)) {
+    voxels += static_cast<std::size_t>(update.voxels_size());
+    if (!update.complete()) continue;
+    if (versions_only) {
+      std::printf("version %llu (from %llu)\n", (unsigned long long)update.map_version(),
+                  (unsigned long long)update.from_version());
+    } else {
+      std::printf("version %llu (from %llu)%s: %zu voxels changed\n",
+                  (unsigned long long)update.map_version(),
+                  (unsigned long long)update.from_version(), update.full() ? " full" : "", voxels);
+    }
+    std::fflush(stdout);
+    voxels = 0;
+    if (count > 0 && ++versions >= count) {
+      context.TryCancel();
+      break;
+    }
+  }
+  const auto status = reader->Finish();
+  if (!status.ok() && status.error_code() != grpc::StatusCode::CANCELLED) {
+    return Failed(ctx, status);
+  }
+  return fusion::clients::kExitOk;
+}
+
+}  // namespace fusionctl
