@@ -77,7 +77,7 @@ void Persister::Loop() {
     if (changed) {
       std::uint64_t version = 0, bytes = 0;
       std::string error;
-      SaveNow(&version, &bytes, &error);  // logs its own errors
+      (void)SaveNow(&version, &bytes, &error);  // logs its own errors and counts them
     }
     lock.lock();
   }

@@ -71,7 +71,9 @@ grpc::Status ReadSnapshot(v1::FusionMap::Stub* stub, const std::string& request_
     *bytes += chunk.data();
   }
   const grpc::Status status = reader->Finish();
-  if (status.ok()) EXPECT_EQ(bytes->size(), total);
+  if (status.ok()) {
+    EXPECT_EQ(bytes->size(), total);
+  }
   return status;
 }
 

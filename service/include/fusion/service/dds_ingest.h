@@ -34,7 +34,7 @@ class DdsIngest {
   DdsIngest& operator=(const DdsIngest&) = delete;
 
   // Creates the topic and reader in `participant` and starts the thread.
-  bool Start(dds_entity_t participant, std::string* error);
+  [[nodiscard]] bool Start(dds_entity_t participant, std::string* error);
   // Stops the thread and deletes the reader (the participant stays).
   void Stop();
 

@@ -71,7 +71,7 @@ class FusionWorker {
 
   // `history` (may be null) is a map loaded from disk: the committed history to go on from.
   // Publishes the first version and starts the threads.
-  bool Start(std::unique_ptr<octomap::OcTree> history, std::string* error);
+  [[nodiscard]] bool Start(std::unique_ptr<octomap::OcTree> history, std::string* error);
   // Integrates what is still queued, renders and commits everything, publishes, stops.
   void Stop();
 

@@ -28,7 +28,7 @@ class Persister {
   void Start();
   void Stop();
   // Writes the current snapshot now. Returns false with *error on failure.
-  bool SaveNow(std::uint64_t* version, std::uint64_t* bytes, std::string* error);
+  [[nodiscard]] bool SaveNow(std::uint64_t* version, std::uint64_t* bytes, std::string* error);
   // The version the file on disk holds (loaded or last written); UINT64_MAX for none.
   void set_saved_version(std::uint64_t version);
   [[nodiscard]] std::uint64_t saves() const { return saves_.load(); }

@@ -23,12 +23,12 @@ class FusionServer {
 
   // Loads the last snapshot, starts the worker, joins DDS and starts listening. Returns false
   // with *error set on failure (a corrupt snapshot is set aside and logged, not an error).
-  bool Start(std::string* error);
+  [[nodiscard]] bool Start(std::string* error);
   // Port actually bound (useful with port 0).
   [[nodiscard]] int port() const { return port_; }
   // Stops serving (streams end, running calls get the deadline), leaves DDS, integrates what
   // is queued, writes the final snapshot. False if that snapshot could not be written.
-  bool Shutdown(std::chrono::milliseconds deadline = std::chrono::milliseconds(2000));
+  [[nodiscard]] bool Shutdown(std::chrono::milliseconds deadline = std::chrono::milliseconds(2000));
 
   // The health service's entry for snapshot writes (SERVING unless they fail).
   static constexpr const char* kPersistenceHealth = "fusion.v1.Persistence";
