@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "fusion/service/conversions.h"
+#include "fusion/service/security.h"
 
 namespace fusion::service {
 namespace {
@@ -238,7 +239,7 @@ bool ValidateConfig(const fusion::v1::ServiceConfig& config, std::string* error)
   }
   return ValidateSensors(config, error) && ValidateMap(config.map(), error) &&
          ValidateBeamLengths(config, error) && ValidateIngest(config.ingest(), error) &&
-         ValidateLimits(config.limits(), error);
+         ValidateLimits(config.limits(), error) && ValidateSecurity(config.security(), error);
 }
 
 bool ParseSensorFlag(const std::string& value, fusion::v1::SensorConfig* sensor,

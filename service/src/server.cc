@@ -9,6 +9,7 @@
 #include "fusion/service/dds_ingest.h"
 #include "fusion/service/map_service.h"
 #include "fusion/service/map_stack.h"
+#include "fusion/service/security.h"
 
 namespace fusion::service {
 
@@ -42,11 +43,17 @@ bool FusionServer::Start(std::string* error) {
   p.ingest = std::make_unique<DdsIngest>(p.stack->queues(), ingest_options);
   if (!p.ingest->Start(participant_, error)) return false;
 
+  const auto credentials = ServerCredentialsFor(config_.security(), error);
+  if (!credentials) {
+    *error = "security: " + *error;
+    return false;
+  }
   grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  // The plugin is registered for every server built after it: once, only when wanted.
+  if (ReflectionEnabled(config_.security())) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   p.service = std::make_unique<MapService>(p.stack->state());
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(config_.listen_address(), grpc::InsecureServerCredentials(), &port_);
+  builder.AddListeningPort(config_.listen_address(), credentials, &port_);
   builder.RegisterService(p.service.get());
   server_ = builder.BuildAndStart();
   if (!server_ || port_ == 0) {
@@ -67,6 +74,12 @@ bool FusionServer::Start(std::string* error) {
   spdlog::info("{} sensor(s) configured; map resolution {} m, rule {}",
                p.stack->state()->sensors.size(), p.stack->map_options().resolution_m,
                config_.map().fusion_rule());
+  const auto& security = config_.security();
+  spdlog::info("gRPC: {}{}, {}, reflection {}",
+               security.tls_cert_file().empty() ? "plaintext" : "TLS",
+               security.tls_client_ca_file().empty() ? "" : " with client certificates",
+               security.tokens_file().empty() ? "no tokens" : "bearer tokens",
+               ReflectionEnabled(security) ? "on" : "off");
   return true;
 }
 

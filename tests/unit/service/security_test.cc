@@ -1,0 +1,110 @@
+// The token file, the role each method needs, the token check and the static checks of the
+// security configuration (security.h); the TLS handshakes are tested end to end
+// (tests/integration/fusiond_security_test.cc).
+#include "fusion/service/security.h"
+
+#include <gtest/gtest.h>
+
+namespace fusion::service {
+namespace {
+
+using grpc::StatusCode;
+
+const std::string kAdmin = "0123456789abcdef-admin";
+const std::string kRead = "0123456789abcdef-read";
+
+TEST(SecurityTest, TokensFileLinesCommentsAndErrors) {
+  std::vector<Token> tokens;
+  std::string error;
+  ASSERT_TRUE(ParseTokens("# tokens\n\nadmin " + kAdmin + "  # ops\n  read " + kRead + "\n",
+                          &tokens, &error))
+      << error;
+  ASSERT_EQ(tokens.size(), 2u);
+  EXPECT_EQ(tokens[0].role, Role::kAdmin);
+  EXPECT_EQ(tokens[0].secret, kAdmin);
+  EXPECT_EQ(tokens[1].role, Role::kRead);
+  const std::vector<std::string> bad_files = {"writer " + kAdmin, "admin",
+                                              "admin " + kAdmin + " extra", "read short",
+                                              "# nothing\n"};
+  for (const std::string& bad : bad_files) {
+    std::vector<Token> none;
+    EXPECT_FALSE(ParseTokens(bad, &none, &error)) << bad;
+    EXPECT_FALSE(error.empty());
+  }
+  EXPECT_FALSE(ParseTokens("read " + kRead + "\nbogus line here\n", &tokens, &error));
+  EXPECT_NE(error.find("line 2"), std::string::npos) << error;
+}
+
+TEST(SecurityTest, OnlyResetAndSaveNeedAdmin) {
+  EXPECT_EQ(RequiredRole("/fusion.v1.FusionMap/ResetMap"), Role::kAdmin);
+  EXPECT_EQ(RequiredRole("/fusion.v1.FusionMap/SaveMap"), Role::kAdmin);
+  for (const char* method : {"/fusion.v1.FusionMap/QueryPoints", "/fusion.v1.FusionMap/GetSnapshot",
+                             "/fusion.v1.FusionMap/StreamUpdates", "/grpc.health.v1.Health/Check",
+                             ""}) {
+    EXPECT_EQ(RequiredRole(method), Role::kRead) << method;
+  }
+}
+
+TEST(SecurityTest, BearerTokensAreCheckedAgainstTheRoleOfTheMethod) {
+  const TokenAuthProcessor processor({{Role::kAdmin, kAdmin}, {Role::kRead, kRead}});
+  const std::string reset = "/fusion.v1.FusionMap/ResetMap";
+  const std::string query = "/fusion.v1.FusionMap/QueryPoints";
+  EXPECT_TRUE(processor.Check("Bearer " + kAdmin, reset).ok());
+  EXPECT_TRUE(processor.Check("Bearer " + kAdmin, query).ok());
+  EXPECT_TRUE(processor.Check("Bearer " + kRead, query).ok());
+  EXPECT_EQ(processor.Check("Bearer " + kRead, reset).error_code(), StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(processor.Check("", query).error_code(), StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(processor.Check(kRead, query).error_code(), StatusCode::UNAUTHENTICATED);  // no scheme
+  EXPECT_EQ(processor.Check("Basic " + kRead, query).error_code(), StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(processor.Check("Bearer " + kRead.substr(1), query).error_code(),
+            StatusCode::UNAUTHENTICATED);  // a prefix is not the token
+  EXPECT_EQ(processor.Check("Bearer " + kRead + "0", query).error_code(),
+            StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(processor.Check("Bearer ", query).error_code(), StatusCode::UNAUTHENTICATED);
+}
+
+fusion::v1::SecurityConfig Security(const std::string& cert, const std::string& key,
+                                    const std::string& client_ca, const std::string& tokens) {
+  fusion::v1::SecurityConfig security;
+  security.set_tls_cert_file(cert);
+  security.set_tls_key_file(key);
+  security.set_tls_client_ca_file(client_ca);
+  security.set_tokens_file(tokens);
+  return security;
+}
+
+TEST(SecurityTest, StaticChecksNameTheField) {
+  std::string error;
+  EXPECT_TRUE(ValidateSecurity(Security("", "", "", ""), &error));
+  EXPECT_TRUE(ValidateSecurity(Security("c", "k", "ca", "t"), &error));
+  const std::pair<fusion::v1::SecurityConfig, std::string> bad[] = {
+      {Security("c", "", "", ""), "security.tls_key_file"},
+      {Security("", "k", "", ""), "security.tls_cert_file"},
+      {Security("", "", "ca", ""), "security.tls_client_ca_file"},
+      {Security("", "", "", "t"), "security.tokens_file"},
+  };
+  for (const auto& [security, field] : bad) {
+    EXPECT_FALSE(ValidateSecurity(security, &error)) << field;
+    EXPECT_EQ(error.rfind(field, 0), 0u) << error;
+  }
+}
+
+TEST(SecurityTest, ReflectionFollowsTokensUnlessConfigured) {
+  auto security = Security("", "", "", "");
+  EXPECT_TRUE(ReflectionEnabled(security));
+  security = Security("c", "k", "", "t");
+  EXPECT_FALSE(ReflectionEnabled(security));
+  security.set_reflection(true);
+  EXPECT_TRUE(ReflectionEnabled(security));
+}
+
+TEST(SecurityTest, UnreadableFilesAreErrors) {
+  std::string error;
+  EXPECT_EQ(ServerCredentialsFor(Security("/nonexistent.pem", "/nonexistent.key", "", ""), &error),
+            nullptr);
+  EXPECT_NE(error.find("/nonexistent"), std::string::npos) << error;
+  EXPECT_NE(ServerCredentialsFor(Security("", "", "", ""), &error), nullptr);  // plaintext
+}
+
+}  // namespace
+}  // namespace fusion::service
