@@ -156,6 +156,7 @@ fusion::v1::ServiceConfig DefaultConfig() {
   config.set_dds_domain(0);
   config.set_dds_topic("fusion/points");
   config.set_log_level("info");
+  config.set_log_format("text");
   auto* map = config.mutable_map();
   map->set_resolution_m(0.05);
   map->set_fusion_rule("independent_opinion_pool");
@@ -235,6 +236,11 @@ bool ValidateConfig(const fusion::v1::ServiceConfig& config, std::string* error)
   if (!level_ok) {
     *error = "log_level: '" + config.log_level() +
              "' is not one of trace, debug, info, warn, error, critical, off";
+    return false;
+  }
+  if (!config.log_format().empty() && config.log_format() != "text" &&
+      config.log_format() != "json") {
+    *error = "log_format: '" + config.log_format() + "' is not text or json";
     return false;
   }
   return ValidateSensors(config, error) && ValidateMap(config.map(), error) &&

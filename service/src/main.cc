@@ -1,7 +1,6 @@
 // fusiond: the forward-model occupancy fusion service.
 #include <malloc.h>
 
-#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include <csignal>
@@ -10,6 +9,7 @@
 #include <string>
 
 #include "fusion/service/config.h"
+#include "fusion/service/logging.h"
 #include "fusion/service/server.h"
 
 namespace {
@@ -25,6 +25,7 @@ Usage: fusiond [options]
   --dds-domain N      DDS domain id (default 0)
   --dds-topic NAME    DDS topic of the point clouds (default fusion/points)
   --log-level LEVEL   trace, debug, info, warn, error, critical, off (default info)
+  --log-format FMT    text (default) or json (one object a line)
   --sensor ID=PRESET  accept clouds of sensor ID, modelled with PRESET (sr3000, stoc);
                       repeatable, added to the configuration file's sensors
   --resolution M      map voxel size in metres (default 0.05)
@@ -93,6 +94,8 @@ int main(int argc, char** argv) {
       config.set_dds_topic(argv[++i]);
     } else if (arg == "--log-level" && has_value) {
       config.set_log_level(argv[++i]);
+    } else if (arg == "--log-format" && has_value) {
+      config.set_log_format(argv[++i]);
     } else if (arg == "--sensor" && has_value) {
       if (!fusion::service::ParseSensorFlag(argv[++i], config.add_sensors(), &error)) {
         return Fail(error);
@@ -121,8 +124,7 @@ int main(int argc, char** argv) {
   }
   if (!fusion::service::ValidateConfig(config, &error)) return Fail(error);
   // Logs go to stderr: stdout carries only the "listening on" line a parent may read.
-  spdlog::set_default_logger(spdlog::stderr_color_mt("fusiond"));
-  spdlog::set_level(spdlog::level::from_str(config.log_level()));
+  fusion::service::SetUpLogging(config.log_format(), config.log_level());
 
   // Block the stop signals in every thread; main waits for them below.
   sigset_t stop_signals;

@@ -74,10 +74,14 @@ class FusiondServiceTest : public ::testing::Test {
                            << "persistence { path: \"" << snapshot_ << "\" interval_s: 1 }\n";
   }
 
-  // Starts fusiond and connects the stubs.
-  std::unique_ptr<Subprocess> Start() {
-    auto process =
-        std::make_unique<Subprocess>(std::vector<std::string>{kFusiond, "--config", config_});
+  // Starts fusiond and connects the stubs; with `stderr_path` its log is appended there.
+  std::unique_ptr<Subprocess> Start(const std::string& stderr_path = "") {
+    std::vector<std::string> argv{kFusiond, "--config", config_};
+    if (!stderr_path.empty()) {
+      argv = {"/bin/sh", "-c",
+              "exec '" + kFusiond + "' --config '" + config_ + "' 2>>'" + stderr_path + "'"};
+    }
+    auto process = std::make_unique<Subprocess>(argv);
     EXPECT_TRUE(process->started());
     const auto port = process->WaitForOutput(R"(listening on 127\.0\.0\.1:(\d+))", 20s);
     EXPECT_TRUE(port) << "no port line in: " << process->output();

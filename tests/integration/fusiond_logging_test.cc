@@ -1,0 +1,62 @@
+// fusiond's JSON log end to end (issue 15, item 4): with log_format "json" every line of its
+// stderr is one JSON object, through a map built, a snapshot written at exit and loaded at the
+// next start, and no foreign console line among them.
+#include <google/protobuf/struct.pb.h>
+#include <google/protobuf/util/json_util.h>
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "../support/fusiond_fixture.h"
+
+namespace {
+
+using namespace fusion::testing;  // NOLINT: the fixture and its helpers
+using namespace std::chrono_literals;
+
+TEST_F(FusiondServiceTest, JsonLogLinesAllParseThroughSnapshotWriteAndLoad) {
+  std::string text;
+  {
+    std::ifstream in(config_);
+    text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const auto level = text.find("log_level: \"warn\"");
+  ASSERT_NE(level, std::string::npos) << text;
+  text.replace(level, std::string("log_level: \"warn\"").size(), "log_level: \"debug\"");
+  std::ofstream(config_) << text << "log_format: \"json\"\n";
+  const std::string log = dir_ + "/fusiond.log";
+  {
+    auto fusiond = Start(log);
+    ASSERT_TRUE(fusiond);
+    TestPublisher publisher(domain_);
+    ASSERT_TRUE(publisher.WaitForReader(10s));
+    ASSERT_GT(MapTheBoard(publisher), 0u);
+    ASSERT_EQ(fusiond->Stop(SIGTERM, 15s), 0);  // writes the final snapshot
+  }
+  {
+    auto fusiond = Start(log);  // loads it
+    ASSERT_TRUE(fusiond);
+    EXPECT_EQ(Occupancy(kOnBoard).state(), fusion::v1::VOXEL_STATE_OCCUPIED);
+    ASSERT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+  }
+  std::ifstream in(log);
+  int lines = 0;
+  bool written = false, loaded = false;
+  for (std::string line; std::getline(in, line); ++lines) {
+    google::protobuf::Struct object;
+    ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(line, &object).ok())
+        << "not a JSON line: " << line;
+    for (const char* key : {"time", "level", "logger", "message"}) {
+      EXPECT_EQ(object.fields().count(key), 1u) << key << " missing: " << line;
+    }
+    const std::string message = object.fields().at("message").string_value();
+    written |= message.find("snapshot: version") != std::string::npos &&
+               message.find("written") != std::string::npos;
+    loaded |= message.find("snapshot: loaded") != std::string::npos;
+  }
+  EXPECT_GT(lines, 10);
+  EXPECT_TRUE(written);
+  EXPECT_TRUE(loaded);
+}
+
+}  // namespace
