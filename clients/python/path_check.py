@@ -8,6 +8,10 @@ with a ring of points at --radius around it, asks fusiond for their occupancy in
 
 Exit status: 0 the path is clear, 1 it collides, 2 usage or connection error.
 
+A fusiond with TLS and tokens (docs/security.md): --tls-ca (the CA of its certificate),
+--tls-cert / --tls-key (mutual TLS), --token-file (first line: the bearer token), or the
+environment variables FUSION_TLS_CA, FUSION_TLS_CERT, FUSION_TLS_KEY, FUSION_TOKEN_FILE.
+
 Stubs: generated from proto/ with
   python3 -m grpc_tools.protoc ... or protoc --python_out=. --grpc_out=.
       --plugin=protoc-gen-grpc=/usr/bin/grpc_python_plugin fusion/v1/map_service.proto
@@ -16,6 +20,7 @@ Stubs: generated from proto/ with
 
 import argparse
 import math
+import os
 import sys
 
 import grpc
@@ -99,6 +104,37 @@ def check_path(stub, start, goal, radius_m=0.0, unknown_is_obstacle=False, timeo
     return False, first_block[0], first_block[1], counts
 
 
+def read_bytes(path):
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def make_channel(args):
+    """An insecure channel, or TLS (and a bearer token) when a CA is given."""
+    ca = args.tls_ca or os.environ.get("FUSION_TLS_CA")
+    cert = args.tls_cert or os.environ.get("FUSION_TLS_CERT")
+    key = args.tls_key or os.environ.get("FUSION_TLS_KEY")
+    token_file = args.token_file or os.environ.get("FUSION_TOKEN_FILE")
+    if not ca:
+        if cert or key or token_file:
+            raise ValueError("--tls-cert, --tls-key and --token-file need --tls-ca")
+        return grpc.insecure_channel(args.server)
+    if bool(cert) != bool(key):
+        raise ValueError("--tls-cert and --tls-key go together")
+    credentials = grpc.ssl_channel_credentials(
+        root_certificates=read_bytes(ca),
+        private_key=read_bytes(key) if key else None,
+        certificate_chain=read_bytes(cert) if cert else None)
+    if token_file:
+        with open(token_file, encoding="utf-8") as f:
+            token = f.readline().strip()
+        if not token:
+            raise ValueError(f"{token_file}: no token on its first line")
+        credentials = grpc.composite_channel_credentials(
+            credentials, grpc.access_token_call_credentials(token))
+    return grpc.secure_channel(args.server, credentials)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--server", default="127.0.0.1:50051", help="fusiond address")
@@ -107,10 +143,18 @@ def main(argv=None):
     parser.add_argument("--radius", type=float, default=0.0, help="robot radius in metres")
     parser.add_argument("--unknown-is-obstacle", action="store_true")
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds per call")
+    parser.add_argument("--tls-ca", help="CA certificate (PEM) of fusiond's TLS certificate")
+    parser.add_argument("--tls-cert", help="client certificate (PEM) for mutual TLS")
+    parser.add_argument("--tls-key", help="client key (PEM) for mutual TLS")
+    parser.add_argument("--token-file", help="file whose first line is the bearer token")
     args = parser.parse_args(argv)
     if args.radius < 0:
         parser.error("--radius must not be negative")
-    stub = pb_grpc.FusionMapStub(grpc.insecure_channel(args.server))
+    try:
+        channel = make_channel(args)
+    except (OSError, ValueError) as e:
+        parser.error(str(e))
+    stub = pb_grpc.FusionMapStub(channel)
     try:
         clear, dist, point, counts = check_path(stub, args.start, args.goal, args.radius,
                                                 args.unknown_is_obstacle, args.timeout)

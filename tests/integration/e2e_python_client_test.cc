@@ -37,12 +37,12 @@ const std::string kPython = "/usr/bin/python3";
 
 // Runs path_check.py; returns its exit code and stdout + stderr.
 int PathCheck(const std::string& server, const std::string& from, const std::string& to,
-              std::string* out) {
+              std::string* out, const std::string& extra = "") {
   const std::string log = ::testing::TempDir() + "path_check_" + std::to_string(getpid()) + ".log";
   Subprocess process({"/bin/sh", "-c",
                       "exec " + kPython + " " + fusion::testing::kRepoDir +
                           "/clients/python/path_check.py --server " + server + " --from " + from +
-                          " --to " + to + " --timeout 3 2>&1"},
+                          " --to " + to + " --timeout 3 " + extra + " 2>&1"},
                      {"PYTHONPATH=" + fusion::testing::kBuildDir + "/clients/python"});
   process.WaitForOutput("(?!)", 30s);
   const int code = process.Wait(5000ms);
@@ -102,6 +102,34 @@ TEST_F(E2ePythonClientTest, PathCheckFindsTheBoard) {
   EXPECT_NO_FATAL_FAILURE(fusiond_->Stop(SIGTERM, 10000ms));
   EXPECT_EQ(PathCheck(address_, "0.5,0,0", "1.2,0,0", &out), 2) << out;
   EXPECT_NE(out.find("cannot query fusiond"), std::string::npos) << out;
+}
+
+// The same client against a fusiond with TLS and bearer tokens (docs/security.md).
+TEST_F(E2ePythonClientTest, PathCheckSpeaksTlsWithAToken) {
+  const std::string certs = ::testing::TempDir() + "python_tls_" + std::to_string(getpid());
+  fs::remove_all(certs);
+  ASSERT_EQ(std::system((fusion::testing::kRepoDir + "/scripts/make_certs.sh " + certs +
+                         " > /dev/null")
+                            .c_str()),
+            0);
+  ASSERT_NO_FATAL_FAILURE(StartFusiond(
+      "log_level: \"warn\"\n"
+      "sensors { id: \"sr3000\" preset: \"sr3000\" }\n"
+      "map { resolution_m: 0.05 }\n"
+      "security { tls_cert_file: \"" + certs + "/server.pem\" tls_key_file: \"" + certs +
+      "/server.key\" tokens_file: \"" + certs + "/tokens\" }\n"));
+  std::string out;
+  // An empty map: a path through unknown space is clear unless unknown counts.
+  EXPECT_EQ(PathCheck(address_, "0.5,0,0", "1.2,0,0", &out,
+                      "--tls-ca " + certs + "/ca.pem --token-file " + certs + "/read.token"),
+            0)
+      << out;
+  EXPECT_EQ(out.rfind("clear (", 0), 0u) << out;
+  EXPECT_EQ(PathCheck(address_, "0.5,0,0", "1.2,0,0", &out, "--tls-ca " + certs + "/ca.pem"), 2)
+      << out;  // no token: UNAUTHENTICATED
+  EXPECT_NE(out.find("cannot query fusiond"), std::string::npos) << out;
+  EXPECT_EQ(PathCheck(address_, "0.5,0,0", "1.2,0,0", &out), 2) << out;  // plaintext
+  fs::remove_all(certs);
 }
 
 }  // namespace
