@@ -32,6 +32,11 @@ Usage: fusiond [options]
   --render-interval-ms MS  render cadence (default 200)
   --snapshot FILE     snapshot file (.ot): loaded at start, written periodically and on exit
   --snapshot-interval S    periodic snapshot interval in seconds, 0 = only on exit (default 30)
+  --tls-cert FILE     TLS: the server's certificate chain (PEM); with --tls-key
+  --tls-key FILE      TLS: the server's private key (PEM)
+  --tls-client-ca FILE  mutual TLS: clients need a certificate signed by this CA
+  --tokens-file FILE  bearer tokens, lines "<read|admin> <token>"; needs TLS
+                      (docs/security.md; scripts/make_certs.sh makes all four)
   --help              this text
 
 A bad configuration is refused with a message naming the field; see docs/service.md.
@@ -60,20 +65,10 @@ bool ParseUnsigned(const char* text, unsigned long* value) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  // Clouds are megabytes: allocations of 1 MiB and more are mapped and unmapped on their own,
-  // so memory freed after a burst returns to the system (glibc would otherwise raise this
-  // threshold after the first free and keep freed clouds in its arenas).
-  mallopt(M_MMAP_THRESHOLD, 1 << 20);
-  auto config = fusion::service::DefaultConfig();
+// The flags over the configuration; -1 to go on, else the exit code (--help: 0, bad: 2).
+int ApplyFlags(int argc, char** argv, fusion::v1::ServiceConfig* config_out) {
+  auto& config = *config_out;
   std::string error;
-  // The config file first, so flags override it wherever they stand.
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (std::string(argv[i]) == "--config" &&
-        !fusion::service::LoadConfigFile(argv[i + 1], &config, &error)) {
-      return Fail(error);
-    }
-  }
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     const bool has_value = i + 1 < argc;
@@ -110,6 +105,14 @@ int main(int argc, char** argv) {
         return Fail("--render-interval-ms: not a number of milliseconds");
       }
       config.mutable_map()->set_render_interval_ms(static_cast<unsigned>(ms));
+    } else if (arg == "--tls-cert" && has_value) {
+      config.mutable_security()->set_tls_cert_file(argv[++i]);
+    } else if (arg == "--tls-key" && has_value) {
+      config.mutable_security()->set_tls_key_file(argv[++i]);
+    } else if (arg == "--tls-client-ca" && has_value) {
+      config.mutable_security()->set_tls_client_ca_file(argv[++i]);
+    } else if (arg == "--tokens-file" && has_value) {
+      config.mutable_security()->set_tokens_file(argv[++i]);
     } else if (arg == "--snapshot" && has_value) {
       config.mutable_persistence()->set_path(argv[++i]);
     } else if (arg == "--snapshot-interval" && has_value) {
@@ -122,6 +125,24 @@ int main(int argc, char** argv) {
       return Fail("unknown or incomplete option '" + arg + "' (see --help)");
     }
   }
+  return -1;
+}
+
+int main(int argc, char** argv) {
+  // Clouds are megabytes: allocations of 1 MiB and more are mapped and unmapped on their own,
+  // so memory freed after a burst returns to the system (glibc would otherwise raise this
+  // threshold after the first free and keep freed clouds in its arenas).
+  mallopt(M_MMAP_THRESHOLD, 1 << 20);
+  auto config = fusion::service::DefaultConfig();
+  std::string error;
+  // The config file first, so flags override it wherever they stand.
+  for (int i = 1; i + 1 < argc; ++i) {
+    if (std::string(argv[i]) == "--config" &&
+        !fusion::service::LoadConfigFile(argv[i + 1], &config, &error)) {
+      return Fail(error);
+    }
+  }
+  if (const int exit_code = ApplyFlags(argc, argv, &config); exit_code >= 0) return exit_code;
   if (!fusion::service::ValidateConfig(config, &error)) return Fail(error);
   // Logs go to stderr: stdout carries only the "listening on" line a parent may read.
   fusion::service::SetUpLogging(config.log_format(), config.log_level());
