@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "../../support/request_helpers.h"
 #include "fusion/sim/simulator.h"
 #include "fusion/v1/config.pb.h"
 #include "fusion/v1/map_service.pb.h"
@@ -32,17 +33,8 @@ inline const Eigen::Vector3d kOnBoard(1.75, 0.0, 0.2);  // a voxel of the paper'
 
 inline double Ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
 
-inline std::chrono::system_clock::time_point In(std::chrono::milliseconds ms) {
-  return std::chrono::system_clock::now() + ms;
-}
-
-inline v1::Point P(const Eigen::Vector3d& v) {
-  v1::Point p;
-  p.set_x(v.x());
-  p.set_y(v.y());
-  p.set_z(v.z());
-  return p;
-}
+using fusion::testing::In;  // a gRPC deadline from now
+using fusion::testing::P;   // a point as the wire's Point
 
 // Nearest-rank percentile of unsorted values.
 inline double Percentile(std::vector<double> v, double q) {
