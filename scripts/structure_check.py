@@ -186,9 +186,17 @@ def function_name(header):
     return match.group(1).replace(" ", "") if match else header[:60]
 
 
+def class_name(header):
+    """The name a class, struct or union header declares ("" for a namespace or an anonymous
+    class)."""
+    match = re.search(r"\b(?:class|struct|union)\s+(?:\[\[.*?\]\]\s*)?(\w+)",
+                      _top_level(_strip_templates(header), "(", ")"))
+    return match.group(1) if match and not re.search(r"\bnamespace\b", header) else ""
+
+
 def find_functions(code):
-    """(header start offset, open offset, close offset, header text) of each function body at
-    namespace or class scope."""
+    """(header start offset, open offset, close offset, header text, enclosing classes) of each
+    function body at namespace or class scope."""
     functions = []
     stack = []  # kinds of the open braces: "scope", "function", "block", "other"
     header_start = 0
@@ -216,7 +224,8 @@ def find_functions(code):
                 continue
             entry = stack.pop()
             if entry[0] == "function":
-                functions.append((entry[2], entry[1], i, entry[3]))
+                classes = [class_name(e[3]) for e in stack if e[0] == "scope"]
+                functions.append((entry[2], entry[1], i, entry[3], [c for c in classes if c]))
             # After a function or a scope the next header starts; after an initializer at
             # namespace or class scope (a member's "a_{1}" in a constructor's initializer
             # list) the header goes on, up to the ";" or "{" that ends it.
@@ -271,7 +280,7 @@ def check_file(path, max_function_lines):
     code = blank_out(text)
     newlines = [i for i, c in enumerate(code) if c == "\n"]
     long_functions = []
-    for header_start, open_offset, close_offset, header in find_functions(code):
+    for header_start, open_offset, close_offset, header, classes in find_functions(code):
         first = header_start + (len(header) - len(header.lstrip()))
         start_line = line_of(newlines, first)
         body_lines = line_of(newlines, close_offset) - line_of(newlines, open_offset) + 1
@@ -279,7 +288,8 @@ def check_file(path, max_function_lines):
             continue
         comment = " ".join(comment_above(lines, start_line - 1))
         explained = re.search(r"\blong\b", comment, re.I) is not None
-        long_functions.append((start_line, function_name(header), body_lines, explained))
+        name = "::".join(classes + [function_name(header)])
+        long_functions.append((start_line, name, body_lines, explained))
     return line_count, long_functions
 
 
