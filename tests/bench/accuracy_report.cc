@@ -26,87 +26,83 @@ void PrintRow(const std::string& scenario, const std::string& method, const Accu
               double seconds) {
   std::printf("| %s | %s | %.3f | %.3f | %.3f | %.3f | %.4f | %.1f | %.3f | %.2f |\n",
               scenario.c_str(), method.c_str(), r.precision, r.surface_precision, r.recall,
-              r.free_accuracy, r.brier,
-              1000.0 * r.mean_surface_error_m, r.unknown_fraction, seconds);
+              r.free_accuracy, r.brier, 1000.0 * r.mean_surface_error_m, r.unknown_fraction,
+              seconds);
 }
 
 double Seconds(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-}  // namespace
+// A table's row group: the sensor runs (indices into the paper's runs) mapped together.
+struct Scenario {
+  std::string name;
+  std::vector<std::size_t> runs;
+};
 
-int main(int argc, char** argv) {
-  const double resolution_m = argc > 1 ? std::atof(argv[1]) : 0.02;
-  const fusion::sim::Scene scene = fusion::sim::PaperBoardScene();
-  const auto all_runs = fusion::sim::PaperSensorRuns();
-  std::vector<std::vector<fusion::sim::OrganizedCloud>> all_frames;
-  for (const auto& run : all_runs) all_frames.push_back(fusion::sim::SimulateRun(scene, run));
+// A way of building our map: the fusion rule across sensors and the combination within one.
+struct Variant {
+  std::string name;
+  fusion::FusionRule rule;
+  fusion::VoxelCombine combine;
+};
 
-  struct Scenario {
-    std::string name;
-    std::vector<std::size_t> runs;
+// The three voxel combinations with Eq. 16; with more than one sensor also the max and
+// De Morgan rules.
+std::vector<Variant> VariantsFor(const Scenario& sc) {
+  std::vector<Variant> variants = {
+      {"ours, mean log-odds, Eq. 16", fusion::FusionRule::kIndependentOpinionPool,
+       fusion::VoxelCombine::kWeightedMeanLogOdds},
+      {"ours, max log-odds, Eq. 16", fusion::FusionRule::kIndependentOpinionPool,
+       fusion::VoxelCombine::kMaxLogOdds},
+      {"ours, pooled log-odds, Eq. 16", fusion::FusionRule::kIndependentOpinionPool,
+       fusion::VoxelCombine::kIndependentPool},
   };
-  const std::vector<Scenario> scenarios = {
-      {"stereo (stoc 160x120, 15 frames)", {1}},
-      {"SR-3000 (176x144, 30 frames)", {0}},
-      {"fused SR-3000 + stereo", {0, 1}},
-  };
-  std::printf(
-      "resolution %.3f m; labels: voxels crossed by noise-free rays (free) or "
-      "holding a\n"
-      "surface (occupied); p = 0.5 where a map has no node\n\n",
-      resolution_m);
-  std::printf(
-      "| scenario | method | precision | precision (surface) | recall | free acc. | Brier | "
-      "surface err. [mm] | unknown | time [s] |\n|---|---|---|---|---|---|---|---|---|---|\n");
-  for (const Scenario& sc : scenarios) {
-    std::vector<fusion::sim::SensorRun> runs;
-    std::vector<std::vector<fusion::sim::OrganizedCloud>> frames;
-    for (std::size_t i : sc.runs) {
-      runs.push_back(all_runs[i]);
-      frames.push_back(all_frames[i]);
-    }
-    const fusion::VoxelLabels labels =
-        fusion::sim::LabelVoxels(scene, fusion::sim::ViewsOf(runs), resolution_m);
-    const auto distance = fusion::sim::SurfaceDistance(scene);
-    struct Variant {
-      std::string name;
-      fusion::FusionRule rule;
-      fusion::VoxelCombine combine;
-    };
-    std::vector<Variant> variants = {
-        {"ours, mean log-odds, Eq. 16", fusion::FusionRule::kIndependentOpinionPool,
-         fusion::VoxelCombine::kWeightedMeanLogOdds},
-        {"ours, max log-odds, Eq. 16", fusion::FusionRule::kIndependentOpinionPool,
-         fusion::VoxelCombine::kMaxLogOdds},
-        {"ours, pooled log-odds, Eq. 16", fusion::FusionRule::kIndependentOpinionPool,
-         fusion::VoxelCombine::kIndependentPool},
-    };
-    if (sc.runs.size() > 1) {
-      variants.push_back({"ours, mean log-odds, max rule", fusion::FusionRule::kMax,
-                          fusion::VoxelCombine::kWeightedMeanLogOdds});
-      variants.push_back({"ours, mean log-odds, De Morgan", fusion::FusionRule::kDeMorgan,
-                          fusion::VoxelCombine::kWeightedMeanLogOdds});
-    }
-    for (const Variant& v : variants) {
-      fusion::WorldMapOptions options;
-      options.resolution_m = resolution_m;
-      options.rule = v.rule;
-      options.render.combine = v.combine;
-      const auto start = Clock::now();
-      const auto map = fusion::sim::BuildForwardModelMap(runs, frames, options);
-      const double seconds = Seconds(start);
-      PrintRow(sc.name, v.name, fusion::EvaluateMap(map->tree(), labels, distance), seconds);
-    }
-    const auto start = Clock::now();
-    const auto octomap_tree = fusion::sim::BuildOctoMap(runs, frames, resolution_m);
-    const double seconds = Seconds(start);
-    PrintRow(sc.name, "OctoMap insertPointCloud",
-             fusion::EvaluateMap(*octomap_tree, labels, distance), seconds);
+  if (sc.runs.size() > 1) {
+    variants.push_back({"ours, mean log-odds, max rule", fusion::FusionRule::kMax,
+                        fusion::VoxelCombine::kWeightedMeanLogOdds});
+    variants.push_back({"ours, mean log-odds, De Morgan", fusion::FusionRule::kDeMorgan,
+                        fusion::VoxelCombine::kWeightedMeanLogOdds});
   }
+  return variants;
+}
 
-  // Planes of the fused map (paper Sec. V).
+// One row per variant of our map and one for OctoMap, each evaluated against the voxels the
+// scenario's noise-free rays label.
+void PrintScenarioRows(const Scenario& sc, const fusion::sim::Scene& scene,
+                       const std::vector<fusion::sim::SensorRun>& all_runs,
+                       const std::vector<std::vector<fusion::sim::OrganizedCloud>>& all_frames,
+                       double resolution_m) {
+  std::vector<fusion::sim::SensorRun> runs;
+  std::vector<std::vector<fusion::sim::OrganizedCloud>> frames;
+  for (std::size_t i : sc.runs) {
+    runs.push_back(all_runs[i]);
+    frames.push_back(all_frames[i]);
+  }
+  const fusion::VoxelLabels labels =
+      fusion::sim::LabelVoxels(scene, fusion::sim::ViewsOf(runs), resolution_m);
+  const auto distance = fusion::sim::SurfaceDistance(scene);
+  for (const Variant& v : VariantsFor(sc)) {
+    fusion::WorldMapOptions options;
+    options.resolution_m = resolution_m;
+    options.rule = v.rule;
+    options.render.combine = v.combine;
+    const auto start = Clock::now();
+    const auto map = fusion::sim::BuildForwardModelMap(runs, frames, options);
+    const double seconds = Seconds(start);
+    PrintRow(sc.name, v.name, fusion::EvaluateMap(map->tree(), labels, distance), seconds);
+  }
+  const auto start = Clock::now();
+  const auto octomap_tree = fusion::sim::BuildOctoMap(runs, frames, resolution_m);
+  const double seconds = Seconds(start);
+  PrintRow(sc.name, "OctoMap insertPointCloud",
+           fusion::EvaluateMap(*octomap_tree, labels, distance), seconds);
+}
+
+// Planes of the fused map (paper Sec. V).
+void PrintPlanesOfTheFusedMap(
+    const std::vector<fusion::sim::SensorRun>& all_runs,
+    const std::vector<std::vector<fusion::sim::OrganizedCloud>>& all_frames, double resolution_m) {
   fusion::WorldMapOptions options;
   options.resolution_m = resolution_m;
   const auto map = fusion::sim::BuildForwardModelMap(all_runs, all_frames, options);
@@ -125,5 +121,32 @@ int main(int argc, char** argv) {
     std::printf("| %.2f | %.2f | %.1f | %zu | %.1f |\n", p.phi_rad * kRadToDeg,
                 p.theta_rad * kRadToDeg, p.distance_m * 1000.0, p.support_voxels, p.rms_m * 1000.0);
   }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const double resolution_m = argc > 1 ? std::atof(argv[1]) : 0.02;
+  const fusion::sim::Scene scene = fusion::sim::PaperBoardScene();
+  const auto all_runs = fusion::sim::PaperSensorRuns();
+  std::vector<std::vector<fusion::sim::OrganizedCloud>> all_frames;
+  for (const auto& run : all_runs) all_frames.push_back(fusion::sim::SimulateRun(scene, run));
+
+  const std::vector<Scenario> scenarios = {
+      {"stereo (stoc 160x120, 15 frames)", {1}},
+      {"SR-3000 (176x144, 30 frames)", {0}},
+      {"fused SR-3000 + stereo", {0, 1}},
+  };
+  std::printf(
+      "resolution %.3f m; labels: voxels crossed by noise-free rays (free) or "
+      "holding a\n"
+      "surface (occupied); p = 0.5 where a map has no node\n\n",
+      resolution_m);
+  std::printf(
+      "| scenario | method | precision | precision (surface) | recall | free acc. | Brier | "
+      "surface err. [mm] | unknown | time [s] |\n|---|---|---|---|---|---|---|---|---|---|\n");
+  for (const Scenario& sc : scenarios)
+    PrintScenarioRows(sc, scene, all_runs, all_frames, resolution_m);
+  PrintPlanesOfTheFusedMap(all_runs, all_frames, resolution_m);
   return 0;
 }

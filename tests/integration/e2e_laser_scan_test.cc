@@ -41,17 +41,6 @@ namespace fs = std::filesystem;
 
 const std::string kScan = std::string(FUSION_SHARED_DATA_DIR) + "/octomap_laser_scan/scan.dat.bz2";
 
-class E2eLaserScanTest : public E2eService {
- protected:
-  void SetUp() override {
-    if (!fs::exists(kScan)) {
-      GTEST_SKIP() << "OctoMap laser scan missing: " << kScan
-                   << " (see ../shared/data/README.md: octomap_laser_scan)";
-    }
-    E2eService::SetUp();
-  }
-};
-
 // The scan's points (scanner frame), through bzip2 -dc.
 std::vector<Eigen::Vector3d> ReadScan(const std::string& path) {
   std::vector<Eigen::Vector3d> points;
@@ -68,90 +57,129 @@ std::size_t CountState(const std::vector<v1::PointOccupancy>& results, v1::Voxel
                                                 [&](const auto& r) { return r.state() == state; }));
 }
 
-TEST_F(E2eLaserScanTest, PointsAreOccupiedAndRaysFree) {
-  const auto scan = ReadScan(kScan);
-  ASSERT_EQ(scan.size(), 88206u) << "bzip2 -dc " << kScan;
+// The scanner's axes, from the data: x forward (azimuth atan2(y, x) spans -91..+91 deg, x
+// from -0.08 to 27 m), y left, z up (elevation -7..+32 deg, the ground at z ~ -0.1 m).
+// The optical frame (x right, y down, z forward) in the scanner frame: x_o = -y_s,
+// y_o = -z_s, z_o = x_s. With the scanner at kScannerInWorld = (1, 2, 0.5) in the world (axes
+// as the scanner's), the pose of the optical frame is that rotation: q = (-0.5, 0.5, -0.5, 0.5).
+const Eigen::Vector3d kScannerInWorld(1.0, 2.0, 0.5);
 
-  // The scanner's axes, from the data: x forward (azimuth atan2(y, x) spans -91..+91 deg, x
-  // from -0.08 to 27 m), y left, z up (elevation -7..+32 deg, the ground at z ~ -0.1 m).
-  // The optical frame (x right, y down, z forward) in the scanner frame: x_o = -y_s,
-  // y_o = -z_s, z_o = x_s. With the scanner at (1, 2, 0.5) in the world (axes as the
-  // scanner's), the pose of the optical frame is that rotation: q = (-0.5, 0.5, -0.5, 0.5).
+Eigen::Matrix3d R_scanner_optical() {
   Eigen::Matrix3d R;
   R.col(0) = Eigen::Vector3d(0, -1, 0);
   R.col(1) = Eigen::Vector3d(0, 0, -1);
   R.col(2) = Eigen::Vector3d(1, 0, 0);
-  const Eigen::Vector3d t(1.0, 2.0, 0.5);
-  const Eigen::Quaterniond q(R);
-  ASSERT_NEAR(std::abs(q.x()), 0.5, 1e-12);  // (-0.5, 0.5, -0.5, 0.5) or its negation
-  const std::string text = dir_ + "/scan_optical.txt";
-  {
-    std::ofstream out(text);
-    out.precision(9);
-    for (const auto& p : scan) {
-      const Eigen::Vector3d o = R.transpose() * p;
-      out << o.x() << ' ' << o.y() << ' ' << o.z() << '\n';
+  return R;
+}
+
+class E2eLaserScanTest : public E2eService {
+ protected:
+  void SetUp() override {
+    if (!fs::exists(kScan)) {
+      GTEST_SKIP() << "OctoMap laser scan missing: " << kScan
+                   << " (see ../shared/data/README.md: octomap_laser_scan)";
     }
+    E2eService::SetUp();
   }
-  std::ostringstream pose;
-  pose.precision(17);
-  pose << t.x() << ',' << t.y() << ',' << t.z() << ',' << q.x() << ',' << q.y() << ',' << q.z()
-       << ',' << q.w();
-  const std::string recording = dir_ + "/scan.frec";
-  std::string out;
-  ASSERT_EQ(RunTool({"fusion-import", "scan", text, "--pose", pose.str(), "--sensor-id", "scanner",
-                     "-o", recording},
-                    &out),
-            0)
-      << out;
-  const auto clouds = ReadRecording(recording);
-  ASSERT_EQ(clouds.size(), 1u);
-  const auto world = WorldPoints(clouds[0]);
-  ASSERT_EQ(world.size(), scan.size());
-  // The recording's pose puts every point back where the scanner saw it (+ t).
-  for (std::size_t i = 0; i < scan.size(); i += 1000) {
-    ASSERT_LT((world[i] - (scan[i] + t)).norm(), 1e-4) << i;
+
+  // The steps of PointsAreOccupiedAndRaysFree; the test calls each in ASSERT_NO_FATAL_FAILURE,
+  // so that a failed ASSERT in a step ends the test as it did when the steps were inline.
+
+  // The scan in the optical frame, imported with its pose into `recording`; *world: the
+  // recording's points in the world frame.
+  void ImportTheScan(const std::vector<Eigen::Vector3d>& scan, const std::string& recording,
+                     std::vector<Eigen::Vector3d>* world) {
+    const Eigen::Matrix3d R = R_scanner_optical();
+    const Eigen::Vector3d& t = kScannerInWorld;
+    const Eigen::Quaterniond q(R);
+    ASSERT_NEAR(std::abs(q.x()), 0.5, 1e-12);  // (-0.5, 0.5, -0.5, 0.5) or its negation
+    const std::string text = dir_ + "/scan_optical.txt";
+    {
+      std::ofstream out(text);
+      out.precision(9);
+      for (const auto& p : scan) {
+        const Eigen::Vector3d o = R.transpose() * p;
+        out << o.x() << ' ' << o.y() << ' ' << o.z() << '\n';
+      }
+    }
+    std::ostringstream pose;
+    pose.precision(17);
+    pose << t.x() << ',' << t.y() << ',' << t.z() << ',' << q.x() << ',' << q.y() << ',' << q.z()
+         << ',' << q.w();
+    std::string out;
+    ASSERT_EQ(RunTool({"fusion-import", "scan", text, "--pose", pose.str(), "--sensor-id",
+                       "scanner", "-o", recording},
+                      &out),
+              0)
+        << out;
+    const auto clouds = ReadRecording(recording);
+    ASSERT_EQ(clouds.size(), 1u);
+    *world = WorldPoints(clouds[0]);
+    ASSERT_EQ(world->size(), scan.size());
+    // The recording's pose puts every point back where the scanner saw it (+ t).
+    for (std::size_t i = 0; i < scan.size(); i += 1000) {
+      ASSERT_LT(((*world)[i] - (scan[i] + t)).norm(), 1e-4) << i;
+    }
   }
 
   // fusiond: one 184 x 66 degree sensor, 0.5 degree beams, 0.3..30 m, 3 cm noise; 0.15 m map.
-  std::ostringstream config;
-  config << "log_level: \"warn\"\n"
-         << "sensors { id: \"scanner\" model: \"paper3d\" r_min_m: 0.3 r_max_m: 30.0\n"
-         << "  fov_h_deg: 184 fov_v_deg: 66 cols: 368 rows: 132 epsilon: 0.02\n"
-         << "  q_mu { a2: 0 a1: 1 a0: 0 } q_sigma { a2: 0 a1: 0 a0: 0.03 } }\n"
-         << "map { resolution_m: 0.15 render_interval_ms: 100 beam_cell_size_m: 0.02 }\n"
-         << "ingest { reliability: \"reliable\" }\n";
-  ASSERT_NO_FATAL_FAILURE(StartFusiond(config.str()));
-  const auto start = std::chrono::steady_clock::now();
-  ASSERT_EQ(RunTool({"fusion-replay", recording, "--domain", std::to_string(domain_), "--fast",
-                     "--reliable", "--quiet"},
-                    &out),
-            0)
-      << out;
-  ASSERT_TRUE(WaitInMap(1, 60s));
-  std::printf("integrated and rendered in %.1f s\n",
-              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-  const auto counters = Counters("scanner");
-  EXPECT_EQ(counters.points_updated(), scan.size()) << counters.ShortDebugString();
-  EXPECT_EQ(counters.points_rejected(), 0u) << "the fan lies in the field of view";
+  // The recording replayed into it; every point used.
+  void ReplayIntoFusiond(const std::string& recording, std::size_t point_count) {
+    std::ostringstream config;
+    config << "log_level: \"warn\"\n"
+           << "sensors { id: \"scanner\" model: \"paper3d\" r_min_m: 0.3 r_max_m: 30.0\n"
+           << "  fov_h_deg: 184 fov_v_deg: 66 cols: 368 rows: 132 epsilon: 0.02\n"
+           << "  q_mu { a2: 0 a1: 1 a0: 0 } q_sigma { a2: 0 a1: 0 a0: 0.03 } }\n"
+           << "map { resolution_m: 0.15 render_interval_ms: 100 beam_cell_size_m: 0.02 }\n"
+           << "ingest { reliability: \"reliable\" }\n";
+    ASSERT_NO_FATAL_FAILURE(StartFusiond(config.str()));
+    const auto start = std::chrono::steady_clock::now();
+    std::string out;
+    ASSERT_EQ(RunTool({"fusion-replay", recording, "--domain", std::to_string(domain_), "--fast",
+                       "--reliable", "--quiet"},
+                      &out),
+              0)
+        << out;
+    ASSERT_TRUE(WaitInMap(1, 60s));
+    std::printf("integrated and rendered in %.1f s\n",
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    const auto counters = Counters("scanner");
+    EXPECT_EQ(counters.points_updated(), point_count) << counters.ShortDebugString();
+    EXPECT_EQ(counters.points_rejected(), 0u) << "the fan lies in the field of view";
+  }
 
   // Occupied at the points (a sample of 1 in 10), free half-way from the scanner to them.
-  std::vector<Eigen::Vector3d> sample, half_way;
-  for (std::size_t i = 0; i < world.size(); i += 10) {
-    sample.push_back(world[i]);
-    if (scan[i].norm() > 2.0) half_way.push_back(t + 0.5 * scan[i]);
+  void ExpectOccupiedAtThePointsFreeOnTheRays(const std::vector<Eigen::Vector3d>& scan,
+                                              const std::vector<Eigen::Vector3d>& world) {
+    const Eigen::Vector3d& t = kScannerInWorld;
+    std::vector<Eigen::Vector3d> sample, half_way;
+    for (std::size_t i = 0; i < world.size(); i += 10) {
+      sample.push_back(world[i]);
+      if (scan[i].norm() > 2.0) half_way.push_back(t + 0.5 * scan[i]);
+    }
+    const auto at_points = Query(sample);
+    const auto on_rays = Query(half_way);
+    ASSERT_EQ(at_points.size(), sample.size());
+    ASSERT_EQ(on_rays.size(), half_way.size());
+    const double occupied = double(CountState(at_points, v1::VOXEL_STATE_OCCUPIED)) / sample.size();
+    const double free = double(CountState(on_rays, v1::VOXEL_STATE_FREE)) / half_way.size();
+    std::printf("%zu points: %.1f%% occupied; %zu half-way points: %.1f%% free\n", sample.size(),
+                100 * occupied, half_way.size(), 100 * free);
+    EXPECT_GE(occupied, 0.8) << sample.size() << " points";
+    EXPECT_GE(free, 0.8) << half_way.size() << " half-way points";
   }
-  const auto at_points = Query(sample);
-  const auto on_rays = Query(half_way);
-  ASSERT_EQ(at_points.size(), sample.size());
-  ASSERT_EQ(on_rays.size(), half_way.size());
-  const double occupied = double(CountState(at_points, v1::VOXEL_STATE_OCCUPIED)) / sample.size();
-  const double free = double(CountState(on_rays, v1::VOXEL_STATE_FREE)) / half_way.size();
-  std::printf("%zu points: %.1f%% occupied; %zu half-way points: %.1f%% free\n", sample.size(),
-              100 * occupied, half_way.size(), 100 * free);
-  EXPECT_GE(occupied, 0.8) << sample.size() << " points";
-  EXPECT_GE(free, 0.8) << half_way.size() << " half-way points";
+};
+
+TEST_F(E2eLaserScanTest, PointsAreOccupiedAndRaysFree) {
+  const auto scan = ReadScan(kScan);
+  ASSERT_EQ(scan.size(), 88206u) << "bzip2 -dc " << kScan;
+  const std::string recording = dir_ + "/scan.frec";
+  std::vector<Eigen::Vector3d> world;
+  ASSERT_NO_FATAL_FAILURE(ImportTheScan(scan, recording, &world));
+  ASSERT_NO_FATAL_FAILURE(ReplayIntoFusiond(recording, scan.size()));
+  ASSERT_NO_FATAL_FAILURE(ExpectOccupiedAtThePointsFreeOnTheRays(scan, world));
   // Behind the scanner (x < -0.5 in the scanner frame) nothing was seen.
+  const Eigen::Vector3d& t = kScannerInWorld;
   const auto behind = Query({t + Eigen::Vector3d(-2, 0, 0.5), t + Eigen::Vector3d(-5, 3, 1)});
   EXPECT_EQ(CountState(behind, v1::VOXEL_STATE_UNKNOWN), 2u);
 

@@ -1,5 +1,7 @@
 // fusiond end to end: a real fusiond process on 127.0.0.1:0 in a private DDS domain, fed with
-// simulated SR-3000 clouds of the paper's board scene over DDS, queried over gRPC.
+// simulated SR-3000 clouds of the paper's board scene over DDS, queried over gRPC. Its
+// persistence (snapshots after kill -9, corrupt files, failing writes) is tested in
+// fusiond_persistence_test.cc with the same fixture.
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 #include <octomap/AbstractOcTree.h>
@@ -8,15 +10,21 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
 #include <fstream>
+#include <functional>
+#include <iterator>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <string>
 #include <thread>
+#include <tuple>
+#include <utility>
+#include <vector>
 
 #include "../support/fusiond_fixture.h"
 #include "fusion/core/sensor.h"
@@ -30,7 +38,6 @@ namespace {
 using namespace fusion::testing;  // NOLINT: the fixture and its helpers
 using namespace std::chrono_literals;
 namespace v1 = fusion::v1;
-namespace fs = std::filesystem;
 
 std::string FetchSnapshot(v1::FusionMap::Stub& stub, v1::GetSnapshotRequest::Format format,
                           std::uint64_t* version) {
@@ -59,35 +66,31 @@ bool Occupied(const octomap::OcTree& tree, const Eigen::Vector3d& p) {
   return node != nullptr && tree.isNodeOccupied(node);
 }
 
-TEST_F(FusiondServiceTest, SurfacesAppearAndEveryQueryAnswersThem) {
-  auto fusiond = Start();
-  ASSERT_TRUE(fusiond);
-  TestPublisher publisher(domain_);
-  ASSERT_TRUE(publisher.ok()) << publisher.error();
-  ASSERT_TRUE(publisher.WaitForReader(10s));
-  const std::uint64_t version = MapTheBoard(publisher);
-  ASSERT_GT(version, 0u);
+// ---- The steps of SurfacesAppearAndEveryQueryAnswersThem, each on the board that
+// MapTheBoard mapped (version `version`); the test calls each in ASSERT_NO_FATAL_FAILURE, so
+// that a failed ASSERT in a step ends the test as it did when the steps were inline.
 
-  // Snapshot in both OctoMap formats, read back by OctoMap itself.
+// Snapshot in both OctoMap formats, read back by OctoMap itself.
+void ExpectSnapshotsInBothFormatsHoldTheBoard(v1::FusionMap::Stub& stub, std::uint64_t version) {
   std::uint64_t snapshot_version = 0;
-  const std::string bt =
-      FetchSnapshot(*stub_, v1::GetSnapshotRequest::FORMAT_BT, &snapshot_version);
+  const std::string bt = FetchSnapshot(stub, v1::GetSnapshotRequest::FORMAT_BT, &snapshot_version);
   EXPECT_GE(snapshot_version, version);
   octomap::OcTree from_bt(0.1);
   std::istringstream bt_stream(bt);
   ASSERT_TRUE(from_bt.readBinary(bt_stream));
   EXPECT_DOUBLE_EQ(from_bt.getResolution(), 0.05);
   EXPECT_TRUE(Occupied(from_bt, kOnBoard));
-  const std::string ot =
-      FetchSnapshot(*stub_, v1::GetSnapshotRequest::FORMAT_OT, &snapshot_version);
+  const std::string ot = FetchSnapshot(stub, v1::GetSnapshotRequest::FORMAT_OT, &snapshot_version);
   std::istringstream ot_stream(ot);
   std::unique_ptr<octomap::AbstractOcTree> from_ot(octomap::AbstractOcTree::read(ot_stream));
   auto* ot_tree = dynamic_cast<octomap::OcTree*>(from_ot.get());
   ASSERT_NE(ot_tree, nullptr);
   EXPECT_TRUE(Occupied(*ot_tree, kOnBoard));
   EXPECT_FALSE(Occupied(*ot_tree, kInFront));
+}
 
-  // Box query, all pages, equals the occupied leaves of the snapshot in that box.
+// Box query, all pages, equals the occupied leaves of the snapshot in that box.
+void ExpectBoxQueryPagesThroughTheBoard(v1::FusionMap::Stub& stub) {
   std::set<std::tuple<double, double, double>> paged;
   std::string token;
   int pages = 0;
@@ -101,7 +104,7 @@ TEST_F(FusiondServiceTest, SurfacesAppearAndEveryQueryAnswersThem) {
     request.set_page_size(50);
     request.set_page_token(token);
     v1::QueryBoxResponse reply;
-    ASSERT_TRUE(stub_->QueryBox(&context, request, &reply).ok());
+    ASSERT_TRUE(stub.QueryBox(&context, request, &reply).ok());
     ASSERT_LE(reply.voxels_size(), 50);
     for (const auto& v : reply.voxels()) {
       EXPECT_EQ(v.state(), v1::VOXEL_STATE_OCCUPIED);
@@ -113,117 +116,142 @@ TEST_F(FusiondServiceTest, SurfacesAppearAndEveryQueryAnswersThem) {
   } while (!token.empty() && pages < 1000);
   EXPECT_GT(pages, 1);
   EXPECT_GT(paged.size(), 100u);  // a 1.2 m x 1 m board at 5 cm
+}
 
-  // A ray from the sensor along +x stops at the board.
-  {
-    grpc::ClientContext context;
-    context.set_deadline(In(5s));
-    v1::CastRayRequest request;
-    *request.mutable_origin() = P({0.0, 0.0, 0.2});
-    *request.mutable_direction() = P({1.0, 0.0, 0.0});
-    request.set_max_range_m(5.0);
-    request.set_ignore_unknown(true);  // the first 0.6 m (below r_min) are unknown
-    v1::CastRayResponse reply;
-    ASSERT_TRUE(stub_->CastRay(&context, request, &reply).ok());
-    EXPECT_TRUE(reply.hit());
-    EXPECT_NEAR(reply.end().x(), 1.75, 0.1);
-  }
+// A ray from the sensor along +x stops at the board.
+void ExpectRayStopsAtTheBoard(v1::FusionMap::Stub& stub) {
+  grpc::ClientContext context;
+  context.set_deadline(In(5s));
+  v1::CastRayRequest request;
+  *request.mutable_origin() = P({0.0, 0.0, 0.2});
+  *request.mutable_direction() = P({1.0, 0.0, 0.0});
+  request.set_max_range_m(5.0);
+  request.set_ignore_unknown(true);  // the first 0.6 m (below r_min) are unknown
+  v1::CastRayResponse reply;
+  ASSERT_TRUE(stub.CastRay(&context, request, &reply).ok());
+  EXPECT_TRUE(reply.hit());
+  EXPECT_NEAR(reply.end().x(), 1.75, 0.1);
+}
 
-  // The board is found as a plane facing the sensor (normal along x, 1.75 m away).
-  {
-    grpc::ClientContext context;
-    context.set_deadline(In(20s));
-    v1::FindPlanesRequest request;
-    *request.mutable_region_min() = P({1.0, -1.0, -0.35});
-    *request.mutable_region_max() = P({2.5, 1.0, 1.0});
-    v1::FindPlanesResponse reply;
-    const auto status = stub_->FindPlanes(&context, request, &reply);
-    ASSERT_TRUE(status.ok()) << status.error_message();
-    ASSERT_GT(reply.planes_size(), 0);
-    EXPECT_GT(std::abs(reply.planes(0).normal().x()), 0.9);
-    EXPECT_NEAR(reply.planes(0).d_m(), 1.75, 0.1);
-  }
+// The board is found as a plane facing the sensor (normal along x, 1.75 m away).
+void ExpectTheBoardIsAPlane(v1::FusionMap::Stub& stub) {
+  grpc::ClientContext context;
+  context.set_deadline(In(20s));
+  v1::FindPlanesRequest request;
+  *request.mutable_region_min() = P({1.0, -1.0, -0.35});
+  *request.mutable_region_max() = P({2.5, 1.0, 1.0});
+  v1::FindPlanesResponse reply;
+  const auto status = stub.FindPlanes(&context, request, &reply);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_GT(reply.planes_size(), 0);
+  EXPECT_GT(std::abs(reply.planes(0).normal().x()), 0.9);
+  EXPECT_NEAR(reply.planes(0).d_m(), 1.75, 0.1);
+}
 
-  // The centre beam saw the board: its p(B) is a distribution with mass near 1.75 m.
-  {
-    grpc::ClientContext context;
-    context.set_deadline(In(5s));
-    v1::InspectBeamRequest request;
-    request.set_sensor_id("sr");
-    request.set_row(kRows / 2);
-    request.set_col(kCols / 2);
-    v1::InspectBeamResponse reply;
-    ASSERT_TRUE(stub_->InspectBeam(&context, request, &reply).ok());
-    EXPECT_TRUE(reply.touched());
-    ASSERT_EQ(reply.first_hit_size(), reply.cell_occupancy_size() + 1);
-    double sum = 0.0, near_board = 0.0;
-    for (int i = 0; i < reply.first_hit_size(); ++i) {
-      sum += reply.first_hit(i);
-      if (std::abs((i + 0.5) * reply.cell_size_m() - 1.75) < 0.1) near_board += reply.first_hit(i);
-    }
-    EXPECT_NEAR(sum, 1.0, 1e-6);
-    // Most of the first-hit mass lies within 10 cm of the board.
-    EXPECT_GT(near_board, 0.5) << "p(B) near 1.75 m: " << near_board;
+// The centre beam saw the board: its p(B) is a distribution with mass near 1.75 m.
+void ExpectTheCentreBeamSawTheBoard(v1::FusionMap::Stub& stub) {
+  grpc::ClientContext context;
+  context.set_deadline(In(5s));
+  v1::InspectBeamRequest request;
+  request.set_sensor_id("sr");
+  request.set_row(kRows / 2);
+  request.set_col(kCols / 2);
+  v1::InspectBeamResponse reply;
+  ASSERT_TRUE(stub.InspectBeam(&context, request, &reply).ok());
+  EXPECT_TRUE(reply.touched());
+  ASSERT_EQ(reply.first_hit_size(), reply.cell_occupancy_size() + 1);
+  double sum = 0.0, near_board = 0.0;
+  for (int i = 0; i < reply.first_hit_size(); ++i) {
+    sum += reply.first_hit(i);
+    if (std::abs((i + 0.5) * reply.cell_size_m() - 1.75) < 0.1) near_board += reply.first_hit(i);
   }
+  EXPECT_NEAR(sum, 1.0, 1e-6);
+  // Most of the first-hit mass lies within 10 cm of the board.
+  EXPECT_GT(near_board, 0.5) << "p(B) near 1.75 m: " << near_board;
+}
 
-  // The update stream starts with the whole map.
-  {
-    grpc::ClientContext context;
-    context.set_deadline(In(5s));
-    v1::StreamUpdatesRequest request;
-    auto reader = stub_->StreamUpdates(&context, request);
-    v1::MapUpdate update;
-    ASSERT_TRUE(reader->Read(&update)) << reader->Finish().error_message();
-    EXPECT_TRUE(update.full());
-    EXPECT_GE(update.map_version(), version);
-    EXPECT_GT(update.voxels_size(), 100);
-    context.TryCancel();
-    reader->Finish();
-  }
-  // A versions-only stream announces the current version, then the version a new frame makes,
-  // without voxels.
-  {
-    grpc::ClientContext context;
-    context.set_deadline(In(10s));
-    v1::StreamUpdatesRequest request;
-    request.set_since_version(version);
-    request.set_versions_only(true);
-    auto reader = stub_->StreamUpdates(&context, request);
-    v1::MapUpdate update;
-    ASSERT_TRUE(reader->Read(&update));
-    const std::uint64_t announced = update.map_version();
-    EXPECT_GE(announced, version);
-    EXPECT_EQ(update.voxels_size(), 0);
-    EXPECT_TRUE(update.complete());
-    PublishBoardFrame(publisher, 1000);
-    ASSERT_TRUE(reader->Read(&update));
-    EXPECT_GT(update.map_version(), announced);
-    EXPECT_EQ(update.from_version(), announced);
-    EXPECT_EQ(update.voxels_size(), 0);
-    context.TryCancel();
-    reader->Finish();
-  }
+// The update stream starts with the whole map.
+void ExpectTheUpdateStreamStartsWithTheMap(v1::FusionMap::Stub& stub, std::uint64_t version) {
+  grpc::ClientContext context;
+  context.set_deadline(In(5s));
+  v1::StreamUpdatesRequest request;
+  auto reader = stub.StreamUpdates(&context, request);
+  v1::MapUpdate update;
+  ASSERT_TRUE(reader->Read(&update)) << reader->Finish().error_message();
+  EXPECT_TRUE(update.full());
+  EXPECT_GE(update.map_version(), version);
+  EXPECT_GT(update.voxels_size(), 100);
+  context.TryCancel();
+  reader->Finish();
+}
+
+// A versions-only stream announces the current version, then the version a new frame makes
+// (published by publish_frame), without voxels.
+void ExpectAVersionsOnlyStreamAnnouncesANewFrame(v1::FusionMap::Stub& stub, std::uint64_t version,
+                                                 const std::function<void()>& publish_frame) {
+  grpc::ClientContext context;
+  context.set_deadline(In(10s));
+  v1::StreamUpdatesRequest request;
+  request.set_since_version(version);
+  request.set_versions_only(true);
+  auto reader = stub.StreamUpdates(&context, request);
+  v1::MapUpdate update;
+  ASSERT_TRUE(reader->Read(&update));
+  const std::uint64_t announced = update.map_version();
+  EXPECT_GE(announced, version);
+  EXPECT_EQ(update.voxels_size(), 0);
+  EXPECT_TRUE(update.complete());
+  publish_frame();
+  ASSERT_TRUE(reader->Read(&update));
+  EXPECT_GT(update.map_version(), announced);
+  EXPECT_EQ(update.from_version(), announced);
+  EXPECT_EQ(update.voxels_size(), 0);
+  context.TryCancel();
+  reader->Finish();
+}
+
+// Saved on request to `snapshot`; OctoMap's own convert_octree reads the file (its output
+// goes to `dir`).
+void ExpectSaveMapWritesWhatOctoMapReads(v1::FusionMap::Stub& stub, const std::string& snapshot,
+                                         const std::string& dir) {
+  grpc::ClientContext context;
+  context.set_deadline(In(10s));
+  v1::SaveMapResponse reply;
+  ASSERT_TRUE(stub.SaveMap(&context, v1::SaveMapRequest(), &reply).ok());
+  EXPECT_EQ(reply.path(), snapshot);
+  const std::string converted = dir + "/converted.bt";
+  const std::string command =
+      "/usr/bin/convert_octree '" + snapshot + "' '" + converted + "' > /dev/null 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0);
+  octomap::OcTree tree(0.1);
+  ASSERT_TRUE(tree.readBinary(converted));
+  EXPECT_TRUE(Occupied(tree, kOnBoard));
+}
+
+TEST_F(FusiondServiceTest, SurfacesAppearAndEveryQueryAnswersThem) {
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  TestPublisher publisher(domain_);
+  ASSERT_TRUE(publisher.ok()) << publisher.error();
+  ASSERT_TRUE(publisher.WaitForReader(10s));
+  const std::uint64_t version = MapTheBoard(publisher);
+  ASSERT_GT(version, 0u);
+
+  ASSERT_NO_FATAL_FAILURE(ExpectSnapshotsInBothFormatsHoldTheBoard(*stub_, version));
+  ASSERT_NO_FATAL_FAILURE(ExpectBoxQueryPagesThroughTheBoard(*stub_));
+  ASSERT_NO_FATAL_FAILURE(ExpectRayStopsAtTheBoard(*stub_));
+  ASSERT_NO_FATAL_FAILURE(ExpectTheBoardIsAPlane(*stub_));
+  ASSERT_NO_FATAL_FAILURE(ExpectTheCentreBeamSawTheBoard(*stub_));
+  ASSERT_NO_FATAL_FAILURE(ExpectTheUpdateStreamStartsWithTheMap(*stub_, version));
+  ASSERT_NO_FATAL_FAILURE(ExpectAVersionsOnlyStreamAnnouncesANewFrame(
+      *stub_, version, [&] { PublishBoardFrame(publisher, 1000); }));
 
   const auto counters = SrCounters();
   EXPECT_GT(counters.integrated(), 0u);
   EXPECT_GT(counters.points_updated(), 0u);
   EXPECT_EQ(counters.rejected(), 0u);
 
-  // Saved on request; OctoMap's own convert_octree reads the file.
-  {
-    grpc::ClientContext context;
-    context.set_deadline(In(10s));
-    v1::SaveMapResponse reply;
-    ASSERT_TRUE(stub_->SaveMap(&context, v1::SaveMapRequest(), &reply).ok());
-    EXPECT_EQ(reply.path(), snapshot_);
-    const std::string converted = dir_ + "/converted.bt";
-    const std::string command =
-        "/usr/bin/convert_octree '" + snapshot_ + "' '" + converted + "' > /dev/null 2>&1";
-    ASSERT_EQ(std::system(command.c_str()), 0);
-    octomap::OcTree tree(0.1);
-    ASSERT_TRUE(tree.readBinary(converted));
-    EXPECT_TRUE(Occupied(tree, kOnBoard));
-  }
+  ASSERT_NO_FATAL_FAILURE(ExpectSaveMapWritesWhatOctoMapReads(*stub_, snapshot_, dir_));
 
   // SIGTERM: exits 0 with a final snapshot; a restart serves the same map without new data.
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
@@ -232,63 +260,6 @@ TEST_F(FusiondServiceTest, SurfacesAppearAndEveryQueryAnswersThem) {
   EXPECT_EQ(Occupancy(kOnBoard).state(), v1::VOXEL_STATE_OCCUPIED);
   EXPECT_EQ(Occupancy(kInFront).state(), v1::VOXEL_STATE_FREE);
   EXPECT_EQ(restarted->Stop(SIGTERM, 15s), 0);
-}
-
-TEST_F(FusiondServiceTest, KillNineRestartRestoresThePeriodicSnapshot) {
-  auto fusiond = Start();
-  ASSERT_TRUE(fusiond);
-  {
-    TestPublisher publisher(domain_);
-    ASSERT_TRUE(publisher.WaitForReader(10s));
-    ASSERT_GT(MapTheBoard(publisher), 0u);
-  }
-  // Wait for a periodic snapshot (interval 1 s) that holds the board.
-  const auto end = std::chrono::steady_clock::now() + 10s;
-  bool saved = false;
-  while (!saved && std::chrono::steady_clock::now() < end) {
-    std::this_thread::sleep_for(200ms);
-    std::unique_ptr<octomap::OcTree> tree;
-    if (fs::exists(snapshot_)) {
-      std::ifstream in(snapshot_, std::ios::binary);
-      std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(in));
-      auto* octree = dynamic_cast<octomap::OcTree*>(read.get());
-      saved = octree != nullptr && Occupied(*octree, kOnBoard);
-    }
-  }
-  ASSERT_TRUE(saved) << "no periodic snapshot with the board in " << snapshot_;
-  const pid_t killed = fusiond->pid();
-  EXPECT_EQ(fusiond->Stop(SIGKILL, 10s), 128 + SIGKILL);
-  // What a kill -9 in the middle of a write leaves: the restart removes it.
-  const std::string stale = snapshot_ + ".tmp-" + std::to_string(killed);
-  std::ofstream(stale) << "half a snapshot";
-  auto restarted = Start();
-  ASSERT_TRUE(restarted);
-  EXPECT_FALSE(fs::exists(stale)) << "stale temporary file left behind";
-  EXPECT_EQ(Occupancy(kOnBoard).state(), v1::VOXEL_STATE_OCCUPIED);
-  EXPECT_EQ(restarted->Stop(SIGTERM, 15s), 0);
-}
-
-TEST_F(FusiondServiceTest, CorruptSnapshotIsSetAsideAndNotOverwritten) {
-  std::ofstream(snapshot_) << "# Octomap OcTree file\nid OcTree\nsize 1000\nres 0.05\ndata\nxyz";
-  auto fusiond = Start();
-  ASSERT_TRUE(fusiond);
-  EXPECT_EQ(Stats().map_leaves(), 0u);
-  int corrupt_files = 0;
-  for (const auto& entry : fs::directory_iterator(dir_)) {
-    if (entry.path().filename().string().rfind("map.ot.corrupt-", 0) == 0) {
-      ++corrupt_files;
-      std::ifstream in(entry.path());
-      std::string first;
-      std::getline(in, first);
-      EXPECT_EQ(first, "# Octomap OcTree file");  // the original bytes, kept
-    }
-  }
-  EXPECT_EQ(corrupt_files, 1);
-  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
-  EXPECT_TRUE(fs::exists(snapshot_));  // a new, valid snapshot
-  std::ifstream in(snapshot_, std::ios::binary);
-  std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(in));
-  EXPECT_NE(dynamic_cast<octomap::OcTree*>(read.get()), nullptr);
 }
 
 // Update streams are bounded: at most limits.max_update_streams at once (one more gets
@@ -371,53 +342,37 @@ TEST_F(FusiondServiceTest, UpdateStreamsAreLimitedAndResendTheMapPageByPage) {
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
 }
 
-// Persistence failures are visible: counted in GetStats, the health entry
-// fusion.v1.Persistence NOT_SERVING while writes fail (SERVING again once they succeed), and a
-// shutdown that cannot write its final snapshot exits non-zero.
-TEST_F(FusiondServiceTest, SnapshotFailuresShowInStatsHealthAndTheExitCode) {
-  const std::string missing = dir_ + "/missing";
-  {
-    std::ifstream in(config_);
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const std::string old_path = "\"" + snapshot_ + "\"";
-    text.replace(text.find(old_path), old_path.size(), "\"" + missing + "/map.ot\"");
-    std::ofstream(config_) << text;
-  }
-  auto fusiond = Start();
-  ASSERT_TRUE(fusiond);
-  const auto persistence = [&] {
-    auto health = grpc::health::v1::Health::NewStub(channel_);
-    grpc::ClientContext context;
-    context.set_deadline(In(5s));
-    grpc::health::v1::HealthCheckRequest request;
-    request.set_service("fusion.v1.Persistence");
-    grpc::health::v1::HealthCheckResponse reply;
-    EXPECT_TRUE(health->Check(&context, request, &reply).ok());
-    return reply.status();
-  };
-  const auto wait_for = [&](grpc::health::v1::HealthCheckResponse::ServingStatus status) {
-    const auto end = std::chrono::steady_clock::now() + 10s;
-    while (persistence() != status && std::chrono::steady_clock::now() < end) {
-      std::this_thread::sleep_for(100ms);
-    }
-    return persistence() == status;
-  };
-  // The periodic write (every second) fails: its directory does not exist.
-  ASSERT_TRUE(wait_for(grpc::health::v1::HealthCheckResponse::NOT_SERVING));
-  v1::Stats stats = Stats();
-  EXPECT_GE(stats.snapshots_failed(), 1u);
-  EXPECT_NE(stats.last_snapshot_error().find(missing), std::string::npos)
-      << stats.last_snapshot_error();
-  EXPECT_EQ(stats.snapshots_saved(), 0u);
-  // Writes succeed once the directory is there.
-  fs::create_directories(missing);
-  ASSERT_TRUE(wait_for(grpc::health::v1::HealthCheckResponse::SERVING));
-  stats = Stats();
-  EXPECT_GE(stats.snapshots_saved(), 1u);
-  EXPECT_TRUE(stats.last_snapshot_error().empty());
-  // The final snapshot cannot be written: the exit code says so.
-  fs::remove_all(missing);
-  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 1);
+// A valid two-point cloud of sensor "sr", and the malformations MalformedCloudsAreRejected...
+// publishes, each with the reason fusiond counts it under.
+TestCloud GoodCloud() {
+  TestCloud c;
+  c.width = 2;
+  c.xyz = {0.f, 0.f, 1.5f, 0.1f, 0.f, 1.5f};
+  return c;
+}
+
+std::vector<std::pair<std::string, TestCloud>> MalformedClouds() {
+  std::vector<std::pair<std::string, TestCloud>> bad;
+  bad.emplace_back("point_count_mismatch", GoodCloud());
+  bad.back().second.xyz.pop_back();
+  bad.emplace_back("beyond_range_mismatch", GoodCloud());
+  bad.back().second.beyond_range = {0, 0, 1};
+  bad.emplace_back("non_finite_pose", GoodCloud());
+  bad.back().second.tx = NAN;
+  bad.emplace_back("non_unit_quaternion", GoodCloud());
+  bad.back().second.qw = 0.5;
+  bad.emplace_back("absurd_point_count", GoodCloud());
+  bad.back().second.width = 1000;
+  bad.back().second.height = 1000;
+  bad.emplace_back("absurd_translation", GoodCloud());
+  bad.back().second.tz = 1e9;
+  // 5 km away: within ingest.max_abs_translation_m, but beyond the map's keys at 5 cm
+  // (+-1638.4 m), where its voxels would wrap around to x = 5000 - 3276.8 m.
+  bad.emplace_back("outside_map", GoodCloud());
+  bad.back().second.tx = 5000.0;
+  bad.emplace_back("unknown_sensor", GoodCloud());
+  bad.back().second.sensor_id = "ghost";
+  return bad;
 }
 
 TEST_F(FusiondServiceTest, MalformedCloudsAreRejectedWhileServing) {
@@ -426,14 +381,8 @@ TEST_F(FusiondServiceTest, MalformedCloudsAreRejectedWhileServing) {
   TestPublisher publisher(domain_);
   ASSERT_TRUE(publisher.WaitForReader(10s));
 
-  const auto good = [] {
-    TestCloud c;
-    c.width = 2;
-    c.xyz = {0.f, 0.f, 1.5f, 0.1f, 0.f, 1.5f};
-    return c;
-  };
   // One valid cloud first: once it is integrated, both sides have discovered each other.
-  auto warm_up = good();
+  auto warm_up = GoodCloud();
   const auto warm_end = std::chrono::steady_clock::now() + 10s;
   while (SrCounters().integrated() == 0 && std::chrono::steady_clock::now() < warm_end) {
     ASSERT_TRUE(publisher.Publish(warm_up));
@@ -441,31 +390,12 @@ TEST_F(FusiondServiceTest, MalformedCloudsAreRejectedWhileServing) {
   }
   const std::uint64_t integrated_before = SrCounters().integrated();
   ASSERT_GT(integrated_before, 0u);
-  std::vector<std::pair<std::string, TestCloud>> bad;
-  bad.emplace_back("point_count_mismatch", good());
-  bad.back().second.xyz.pop_back();
-  bad.emplace_back("beyond_range_mismatch", good());
-  bad.back().second.beyond_range = {0, 0, 1};
-  bad.emplace_back("non_finite_pose", good());
-  bad.back().second.tx = NAN;
-  bad.emplace_back("non_unit_quaternion", good());
-  bad.back().second.qw = 0.5;
-  bad.emplace_back("absurd_point_count", good());
-  bad.back().second.width = 1000;
-  bad.back().second.height = 1000;
-  bad.emplace_back("absurd_translation", good());
-  bad.back().second.tz = 1e9;
-  // 5 km away: within ingest.max_abs_translation_m, but beyond the map's keys at 5 cm
-  // (+-1638.4 m), where its voxels would wrap around to x = 5000 - 3276.8 m.
-  bad.emplace_back("outside_map", good());
-  bad.back().second.tx = 5000.0;
-  bad.emplace_back("unknown_sensor", good());
-  bad.back().second.sensor_id = "ghost";
+  auto bad = MalformedClouds();
   for (auto& [reason, cloud] : bad) {
     ASSERT_TRUE(publisher.Publish(cloud)) << reason;
     std::this_thread::sleep_for(50ms);
   }
-  auto valid = good();
+  auto valid = GoodCloud();
   valid.sequence_number = 99;
   ASSERT_TRUE(publisher.Publish(valid));
 
@@ -514,7 +444,8 @@ TEST_F(FusiondServiceTest, RefusesABadConfigurationNamingTheField) {
       {"map { fusion_rule: \"average\" }", R"(fusiond: map\.fusion_rule: )"},
       {"ingest { reliability: \"sometimes\" }", R"(fusiond: ingest\.reliability: )"},
       // Once an abort in core ("beam too long for the cell size").
-      {"sensors { id: \"sr\" preset: \"sr3000\" r_max_m: 1e9 }", R"(fusiond: sensors\[0\]\.r_max_m: )"},
+      {"sensors { id: \"sr\" preset: \"sr3000\" r_max_m: 1e9 }",
+       R"(fusiond: sensors\[0\]\.r_max_m: )"},
   };
   for (const auto& [text, field] : cases) {
     std::ofstream(config_) << text << "\n";

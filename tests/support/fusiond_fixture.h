@@ -16,14 +16,14 @@
 #include <vector>
 
 #include "dds_publisher.h"
-#include "subprocess.h"
 #include "fusion/core/sensor.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
 #include "fusion/v1/map_service.grpc.pb.h"
+#include "request_helpers.h"
+#include "subprocess.h"
 
 namespace fusion::testing {
-
 
 using namespace std::chrono_literals;
 namespace v1 = fusion::v1;
@@ -36,18 +36,6 @@ constexpr int kRows = 36;
 // A point on the paper's board (x = 1.75) and one in the free space in front of it.
 const Eigen::Vector3d kOnBoard(1.75, 0.0, 0.2);
 const Eigen::Vector3d kInFront(1.0, 0.0, 0.2);
-
-inline v1::Point P(const Eigen::Vector3d& v) {
-  v1::Point p;
-  p.set_x(v.x());
-  p.set_y(v.y());
-  p.set_z(v.z());
-  return p;
-}
-
-inline std::chrono::system_clock::time_point In(std::chrono::milliseconds ms) {
-  return std::chrono::system_clock::now() + ms;
-}
 
 class FusiondServiceTest : public ::testing::Test {
  protected:
