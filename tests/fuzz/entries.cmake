@@ -9,9 +9,11 @@ if(FUSION_BUILD_FUZZERS)
     ${PROJECT_SOURCE_DIR}/service/src/config.cc
     ${PROJECT_SOURCE_DIR}/service/src/conversions.cc
     ${PROJECT_SOURCE_DIR}/service/src/persistence.cc
+    ${PROJECT_SOURCE_DIR}/service/src/security.cc
     ${PROJECT_SOURCE_DIR}/service/src/validation.cc)
   target_include_directories(fusion_fuzz_service PUBLIC ${PROJECT_SOURCE_DIR}/service/include)
-  target_link_libraries(fusion_fuzz_service PUBLIC fusion::core fusion::proto fusion::idl)
+  target_link_libraries(fusion_fuzz_service PUBLIC fusion::core fusion::proto fusion::idl
+    gRPC::grpc++)
   set(fusion_fuzz_service_lib fusion_fuzz_service)
 else()
   set(fusion_fuzz_service_lib fusion::service)
