@@ -1,0 +1,405 @@
+#include "projective_descent.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <optional>
+
+#include "fusion/core/voxel_traversal.h"
+
+namespace fusion::detail {
+namespace {
+
+// Float rounding of the lattice's tangents, covered by widening every box by this.
+constexpr double kTanEps = 1e-5;
+
+double Square(double v) { return v * v; }
+
+// Lattice indices (i, j, k) of the 27 corners of a block's eight children, point n = i + 3 j +
+// 9 k, four at a time (the 28th repeats the origin).
+using F4c = float __attribute__((vector_size(16)));
+constexpr F4c kLatticeI[7] = {{0, 1, 2, 0}, {1, 2, 0, 1}, {2, 0, 1, 2}, {0, 1, 2, 0},
+                              {1, 2, 0, 1}, {2, 0, 1, 2}, {0, 1, 2, 0}};
+constexpr F4c kLatticeJ[7] = {{0, 0, 0, 1}, {1, 1, 2, 2}, {2, 0, 0, 0}, {1, 1, 1, 2},
+                              {2, 2, 0, 0}, {0, 1, 1, 1}, {2, 2, 2, 0}};
+// The lattice points (i + 3 j + 9 k) at the corners of each child (child c: i, j, k offsets from
+// its bits).
+constexpr int kChildCorners[8][8] = {
+    {0, 1, 3, 4, 9, 10, 12, 13},      {1, 2, 4, 5, 10, 11, 13, 14},
+    {3, 4, 6, 7, 12, 13, 15, 16},     {4, 5, 7, 8, 13, 14, 16, 17},
+    {9, 10, 12, 13, 18, 19, 21, 22},  {10, 11, 13, 14, 19, 20, 22, 23},
+    {12, 13, 15, 16, 21, 22, 24, 25}, {13, 14, 16, 17, 22, 23, 25, 26}};
+constexpr F4c kLatticeK[7] = {{0, 0, 0, 0}, {0, 0, 0, 0}, {0, 1, 1, 1}, {1, 1, 1, 1},
+                              {1, 1, 2, 2}, {2, 2, 2, 2}, {2, 2, 2, 0}};
+
+}  // namespace
+
+#ifdef FUSION_COUNT
+// Blocks visited per depth, verdict and free_through (a profiling aid, off by default).
+std::size_t g_counts[17][3][2];
+#endif
+
+Descent::Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                 const RenderOptions& options, const BeamPyramid& pyramid, const LocalGrid& traced,
+                 double t_start, float global_far, const SaturatedFree* skip, RenderedGrid* out,
+                 RenderStats* stats)
+    : tess_(grid.tessellation()),
+      skip_(skip != nullptr && skip->history != nullptr && skip->others.size() <= kMaxOthers
+                ? skip
+                : nullptr),
+      options_(options),
+      pyramid_(pyramid),
+      traced_(traced),
+      R_(T_world_sensor.linear()),
+      Rt_(T_world_sensor.linear().transpose()),
+      origin_(T_world_sensor.translation()),
+      t_start_(t_start),
+      global_far_(global_far),
+      out_(out),
+      stats_(stats) {
+  // Known space ends where the outermost rays of the ray-traced render run: the centre lines of
+  // the edge beams, and beyond r_split (where beams outgrow a voxel) their outermost sub-rays,
+  // 1 / (2 k) of a beam from the edge of the field of view.
+  fov_ = Bounds(0.0);
+  const double width = std::max(tess_.beam_width_h_rad(), tess_.beam_width_v_rad());
+  r_split2_ = Square(options.resolution_m / width);
+  const int k_far =
+      std::clamp(static_cast<int>(std::ceil(width * grid.cells_per_beam() *
+                                            grid.options().cell_size_m / options.resolution_m)),
+                 1, std::max(1, options.max_subrays_per_axis));
+  known_near_ = Bounds(0.5);
+  known_far_ = Bounds(0.5 / k_far);
+  for (int c = 0; c < tess_.cols(); ++c) {
+    col_centres_.push_back(
+        std::tan(-0.5 * grid.spec().fov_h_rad + (c + 0.5) * tess_.beam_width_h_rad()));
+  }
+  for (int r = 0; r < tess_.rows(); ++r) {
+    row_centres_.push_back(
+        std::tan(0.5 * grid.spec().fov_v_rad - (r + 0.5) * tess_.beam_width_v_rad()));
+  }
+  // Every direction of the field of view has z >= cone_ * |p| (its corners lean the most).
+  const double ta = std::max(std::abs(tess_.TanAzimuthMin()), std::abs(tess_.TanAzimuthMax()));
+  const double te = std::max(std::abs(tess_.TanElevationMin()), std::abs(tess_.TanElevationMax()));
+  cone2_ = 1.0 / (1.0 + ta * ta + te * te * (1.0 + ta * ta));
+  t_start2_ = t_start_ * t_start_;
+  global_far2_ = Square(global_far_);
+}
+
+void Descent::CornerAngles(const Eigen::Vector3d& lo, double child_size, F4 point[27]) const {
+  // Corners of the eight children: a 3 x 3 x 3 lattice, its angles in the sensor frame, in
+  // floats so that the loop below runs on vectors (the margins cover the rounding).
+  const Eigen::Vector3d base = Rt_ * (lo - origin_);
+  const Eigen::Matrix3d step = Rt_ * child_size;
+  // Azimuth tangent x / z and the elevation tangent's signed square y |y| / (x^2 + z^2) (no
+  // square root), four lattice points at a time.
+  // The lattice is built on vectors too (scalar stores read back as vectors stall).
+  alignas(16) float pz[28], az[28], el[28];
+  const F4 tiny = {1e-6f, 1e-6f, 1e-6f, 1e-6f};
+  const F4 one = {1.0f, 1.0f, 1.0f, 1.0f};
+  const auto splat = [](double v) {
+    const auto f = static_cast<float>(v);
+    return F4{f, f, f, f};
+  };
+  for (int n = 0; n < 28; n += 4) {
+    const F4& i = kLatticeI[n / 4];
+    const F4& j = kLatticeJ[n / 4];
+    const F4& k = kLatticeK[n / 4];
+    const F4 x =
+        splat(base.x()) + i * splat(step(0, 0)) + j * splat(step(0, 1)) + k * splat(step(0, 2));
+    const F4 y =
+        splat(base.y()) + i * splat(step(1, 0)) + j * splat(step(1, 1)) + k * splat(step(1, 2));
+    const F4 z =
+        splat(base.z()) + i * splat(step(2, 0)) + j * splat(step(2, 1)) + k * splat(step(2, 2));
+    const F4 zs = z > tiny ? z : one;
+    const F4 a = x / zs;
+    const F4 ny = -y;
+    const F4 e = ny * (ny < 0 ? -ny : ny) / (x * x + zs * zs);
+    std::memcpy(pz + n, &z, sizeof z);
+    std::memcpy(az + n, &a, sizeof a);
+    std::memcpy(el + n, &e, sizeof e);
+  }
+  // Per point {azimuth tangent, elevation's signed square, z, -z}: a child's ranges are then
+  // the lane-wise minimum and maximum of its eight corners.
+  for (int n = 0; n < 27; ++n) point[n] = F4{az[n], el[n], pz[n], -pz[n]};
+}
+
+void Descent::SlabDistances(const Eigen::Vector3d& lo, double child_size, double near2[3][2],
+                            double far2[3][2]) const {
+  for (int a = 0; a < 3; ++a) {
+    for (int c = 0; c < 2; ++c) {
+      const double l = lo[a] + c * child_size - origin_[a];
+      const double h = l + child_size;
+      const double n = l > 0.0 ? l : (h < 0.0 ? -h : 0.0);
+      const double f = std::max(std::abs(l), std::abs(h));
+      near2[a][c] = n * n;
+      far2[a][c] = f * f;
+    }
+  }
+}
+
+void Descent::ChildAngles(const F4 point[27], int child, Box* box) {
+  const int* corners = kChildCorners[child];
+  F4 lo4 = point[corners[0]], hi4 = lo4;
+  for (int c = 1; c < 8; ++c) {
+    const F4 q = point[corners[c]];
+    lo4 = lo4 < q ? lo4 : q;
+    hi4 = hi4 > q ? hi4 : q;
+  }
+  const float az_lo = lo4[0], el_lo = lo4[1], az_hi = hi4[0], el_hi = hi4[1];
+  box->z_max = hi4[2];
+  box->ahead = -hi4[3] > 1e-6f;  // the smallest z
+  box->az_lo = az_lo - kTanEps;
+  box->az_hi = az_hi + kTanEps;
+  box->el_lo = std::copysign(std::sqrt(std::abs(el_lo)), el_lo) - kTanEps;
+  box->el_hi = std::copysign(std::sqrt(std::abs(el_hi)), el_hi) + kTanEps;
+}
+
+void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key_min,
+                            const Aggregate& beams, bool free_through, const MapHere& map) {
+  const unsigned child_depth = depth + 1;
+  const int half = 1 << (kTreeDepth - child_depth);
+  const double res = options_.resolution_m;
+  const double child_size = res * half;
+  Eigen::Vector3d lo;
+  for (int a = 0; a < 3; ++a) lo[a] = (key_min[a] - kMapKeyOffset) * res;
+  F4 point[27];
+  CornerAngles(lo, child_size, point);
+  double near2[3][2], far2[3][2];
+  SlabDistances(lo, child_size, near2, far2);
+  std::array<const MapNode*, 8> next = map.lo;
+  for (int child = 0; child < 8; ++child) {
+    const int cx = child & 1, cy = (child >> 1) & 1, cz = (child >> 2) & 1;
+    const MapHere child_map = ChildMap(map, depth, key_min, child, &next);
+    Box box;
+    box.size = child_size;
+    box.lo = lo + Eigen::Vector3d(cx, cy, cz) * child_size;
+    box.r_lo2 = near2[0][cx] + near2[1][cy] + near2[2][cz];
+    box.r_hi2 = far2[0][cx] + far2[1][cy] + far2[2][cz];
+    if (box.r_hi2 <= t_start2_ || box.r_lo2 >= global_far2_) continue;
+    ChildAngles(point, child, &box);
+    const std::array<int, 3> k = {key_min[0] + cx * half, key_min[1] + cy * half,
+                                  key_min[2] + cz * half};
+    const Verdict v = Classify(child_depth, box, beams, free_through);
+    if (Saturated(child_map) &&
+        (v.kind == Kind::kFree || (v.kind == Kind::kMixed && v.free_through))) {
+      ++stats_->skipped_saturated;
+      continue;  // free where the map is held free at the clamp already
+    }
+#ifdef FUSION_COUNT
+    ++g_counts[child_depth][int(v.kind)][free_through ? 1 : 0];
+#endif
+    if (v.kind == Kind::kUnknown) continue;
+    if (v.kind == Kind::kFree) {
+      Emit(child_depth, k, v.free_value);
+    } else if (child_depth == kTreeDepth) {
+      VisitVoxel(k, box, v, Saturated(child_map));
+    } else {
+      VisitChildren(child_depth, k, v.beams, v.free_through, child_map);
+    }
+  }
+}
+
+Descent::MapHere Descent::RootMap() const {
+  MapHere m;
+  if (skip_ == nullptr) return m;
+  m.history = skip_->history->getRoot();
+  for (std::size_t i = 0; i < skip_->others.size(); ++i) {
+    const auto& nodes = skip_->others[i]->nodes();
+    m.lo[i] = nodes.data();
+    m.hi[i] = nodes.data() + nodes.size();
+    if (!nodes.empty() && nodes.front().depth == 0) m.others_cover = true;
+  }
+  return m;
+}
+
+Descent::MapHere Descent::ChildMap(const MapHere& map, unsigned depth,
+                                   const std::array<int, 3>& key_min, int child,
+                                   std::array<const MapNode*, 8>* next) const {
+  MapHere c;
+  if (skip_ == nullptr) return c;
+  const octomap::OcTree& tree = *skip_->history;
+  if (map.history != nullptr) {
+    if (!tree.nodeHasChildren(map.history)) {
+      c.history = map.history;  // a coarser leaf holds the child
+    } else if (tree.nodeChildExists(map.history, static_cast<unsigned>(child))) {
+      c.history = tree.getNodeChild(map.history, static_cast<unsigned>(child));
+    }
+  }
+  c.others_cover = map.others_cover;
+  if (c.others_cover) return c;
+  const octomap::OcTreeKey k(static_cast<octomap::key_type>(key_min[0]),
+                             static_cast<octomap::key_type>(key_min[1]),
+                             static_cast<octomap::key_type>(key_min[2]));
+  const std::uint64_t end = MortonOf(k) + (child + 1) * MortonSpan(depth + 1);
+  for (std::size_t i = 0; i < skip_->others.size(); ++i) {
+    const MapNode* lo = (*next)[i];
+    const MapNode* hi =
+        map.hi[i] - lo <= 16
+            ? std::find_if(lo, map.hi[i], [end](const MapNode& n) { return n.code >= end; })
+            : std::lower_bound(lo, map.hi[i], end,
+                               [](const MapNode& n, std::uint64_t e) { return n.code < e; });
+    (*next)[i] = hi;
+    c.lo[i] = lo;
+    c.hi[i] = hi;
+    if (lo != hi && lo->depth <= depth + 1) c.others_cover = true;
+  }
+  return c;
+}
+
+bool Descent::Saturated(const MapHere& m) const {
+  if (skip_ == nullptr || m.history == nullptr || m.others_cover) return false;
+  if (skip_->history->nodeHasChildren(m.history) ||
+      m.history->getLogOdds() > skip_->clamp_min_log_odds) {
+    return false;
+  }
+  for (std::size_t i = 0; i < skip_->others.size(); ++i) {
+    if (m.lo[i] != m.hi[i]) return false;
+  }
+  return true;
+}
+
+Descent::TanBounds Descent::Bounds(double inset) const {
+  const double w = inset * tess_.beam_width_h_rad();
+  const double h = inset * tess_.beam_width_v_rad();
+  return {std::tan(std::atan(tess_.TanAzimuthMin()) + w),
+          std::tan(std::atan(tess_.TanAzimuthMax()) - w),
+          std::tan(std::atan(tess_.TanElevationMin()) + h),
+          std::tan(std::atan(tess_.TanElevationMax()) - h)};
+}
+
+Descent::Verdict Descent::Classify(unsigned depth, Box& box, const Aggregate& parent,
+                                   bool free_through) const {
+  Verdict v;
+  const bool voxel = depth == kTreeDepth;
+  // Outside the cone that holds the field of view.
+  if (box.z_max < 0.0 || box.z_max * box.z_max < cone2_ * box.r_lo2) return v;
+  // Near the sensor (or behind its image plane) the corners do not bound the angles.
+  if (box.r_lo2 < 4.0 * box.size * box.size || !box.ahead) {
+    if (!voxel) v.kind = Kind::kMixed;
+    return v;
+  }
+  // Exact for azimuth (x / z is linear fractional: its extremes are at corners); the
+  // elevation tangent may peak inside a face, by at most size^2 / (2 r_lo^2) radians.
+  const double margin = box.size * box.size / (2.0 * box.r_lo2);
+  box.el_lo -= margin * (1.0 + box.el_lo * box.el_lo);
+  box.el_hi += margin * (1.0 + box.el_hi * box.el_hi);
+  if (!fov_.Overlaps(box)) return v;
+  const bool in_known = KnownAt(box.r_lo2).Holds(box) && KnownAt(box.r_hi2).Holds(box);
+  if (free_through || voxel) {
+    v.beams = parent;
+    if (v.beams.touched == 0 || box.r_lo2 >= Square(v.beams.max_far)) return v;
+  } else {
+    v.beams = pyramid_.Query(tess_.ColumnOfTangent(box.az_lo), tess_.ColumnOfTangent(box.az_hi),
+                             tess_.RowOfTangent(box.el_hi), tess_.RowOfTangent(box.el_lo));
+    if (v.beams.touched == 0 || box.r_lo2 >= Square(v.beams.max_far)) return v;
+  }
+  const bool all_free =
+      v.beams.touched == v.beams.beams && box.r_hi2 <= Square(v.beams.min_free_end);
+  if (all_free && in_known && box.r_lo2 >= t_start2_) {
+    v.kind = Kind::kFree;
+    v.free_value = v.beams.max_free_value;
+    return v;
+  }
+  v.kind = Kind::kMixed;
+  v.free_through = all_free;
+  return v;
+}
+
+void Descent::VisitVoxel(const std::array<int, 3>& key_min, const Box& box, const Verdict& v,
+                         bool saturated) {
+  const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
+                               static_cast<octomap::key_type>(key_min[1]),
+                               static_cast<octomap::key_type>(key_min[2]));
+  // A voxel free in every beam it overlaps holds no traced segment.
+  if (const auto traced = v.free_through ? std::nullopt : traced_.LogOddsOf(key)) {
+    if (saturated && *traced <= 0.0) {
+      ++stats_->skipped_saturated;
+    } else {
+      Emit(kTreeDepth, key_min, static_cast<float>(*traced));
+    }
+    return;
+  }
+  if (saturated) {  // free at most, where the map holds free at the clamp already
+    ++stats_->skipped_saturated;
+    return;
+  }
+  if (!KnownAt(box.r_hi2).Overlaps(box) || box.r_hi2 <= t_start2_) return;
+  Aggregate reach;
+  if (box.r_hi2 > r_split2_) {
+    reach = pyramid_.Query(tess_.ColumnOfTangent(box.az_lo), tess_.ColumnOfTangent(box.az_hi),
+                           tess_.RowOfTangent(box.el_hi), tess_.RowOfTangent(box.el_lo));
+  } else {
+    // The beams whose centre direction lies in the box: the beams holding its corners, less an
+    // edge beam whose centre lies outside.
+    int c0 = tess_.ColumnOfTangent(box.az_lo), c1 = tess_.ColumnOfTangent(box.az_hi);
+    int r0 = tess_.RowOfTangent(box.el_hi), r1 = tess_.RowOfTangent(box.el_lo);
+    if (col_centres_[c0] < box.az_lo) ++c0;
+    if (col_centres_[c1] > box.az_hi) --c1;
+    if (row_centres_[r0] > box.el_hi) ++r0;  // row centres fall with the row index
+    if (row_centres_[r1] < box.el_lo) --r1;
+    reach = CentreLinesThrough(box, c0, c1 + 1, r0, r1 + 1);
+  }
+  if (reach.touched != 0 && box.r_lo2 < Square(reach.max_free_end)) {
+    Emit(kTreeDepth, key_min, reach.max_free_value);
+  }
+}
+
+Aggregate Descent::CentreLinesThrough(const Box& box, int c0, int c1, int r0, int r1) {
+  Aggregate out;
+  if (c1 <= c0 || r1 <= r0) return out;
+  const Aggregate all = pyramid_.Query(c0, c1 - 1, r0, r1 - 1);
+  if (all.touched == 0 || box.r_lo2 >= Square(all.max_free_end)) return out;
+  const Eigen::Vector3d lo = box.lo - origin_;
+  const Eigen::Vector3d hi = lo + Eigen::Vector3d::Constant(box.size);
+  const auto crosses = [&](int c, int r) {
+    const Aggregate& beam = pyramid_.Beam(c, r);
+    if (beam.touched == 0 || box.r_lo2 >= Square(beam.max_free_end)) return false;
+    const Eigen::Vector3f& d = WorldDirection(static_cast<std::size_t>(r) * tess_.cols() + c);
+    double t_in = 0.0, t_out = std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 3 && t_in <= t_out; ++a) {
+      if (d[a] == 0.0f) {
+        if (lo[a] > 0.0 || hi[a] < 0.0) return false;
+        continue;
+      }
+      const double ta = lo[a] / d[a], tb = hi[a] / d[a];
+      t_in = std::max(t_in, std::min(ta, tb));
+      t_out = std::min(t_out, std::max(ta, tb));
+    }
+    return t_in <= t_out;
+  };
+  // The middle beam's line is the likeliest to cross.
+  if (crosses((c0 + c1 - 1) / 2, (r0 + r1 - 1) / 2)) return all;
+  for (int r = r0; r < r1; ++r) {
+    for (int c = c0; c < c1; ++c) {
+      if (crosses(c, r)) return all;
+    }
+  }
+  return out;
+}
+
+const Eigen::Vector3f& Descent::WorldDirection(std::size_t beam) {
+  if (directions_.empty()) {
+    directions_.resize(tess_.beam_count());
+    have_direction_.assign(tess_.beam_count(), 0);
+  }
+  if (have_direction_[beam] == 0) {
+    directions_[beam] = (R_ * tess_.Direction(beam)).cast<float>();
+    have_direction_[beam] = 1;
+  }
+  return directions_[beam];
+}
+
+void Descent::Emit(unsigned depth, const std::array<int, 3>& key_min, float value) {
+  const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
+                               static_cast<octomap::key_type>(key_min[1]),
+                               static_cast<octomap::key_type>(key_min[2]));
+  out_->Append({MortonOf(key), value, static_cast<std::uint8_t>(depth)});
+  if (depth == kTreeDepth) {
+    ++stats_->fine_voxels;
+  } else {
+    ++stats_->coarse_nodes;
+  }
+}
+
+}  // namespace fusion::detail
