@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
 #include "beam_store_of.h"
@@ -16,21 +18,55 @@ namespace {
 // Largest ULL factor table (entries); beyond it factors are computed on the fly.
 constexpr std::size_t kMaxTableEntries = std::size_t{1} << 25;
 
-}  // namespace
-
-double ResolvePriorCellOccupancy(const BeamGridOptions& options) {
+// The prior cell occupancy the options give (ResolvePriorCellOccupancy), or NaN with *why set.
+double PriorOf(const BeamGridOptions& options, std::string* why) {
   double p0 = options.prior_cell_occupancy;
   if (p0 < 0.0) {
     if (!(options.prior_reference_length_m > 0.0) ||
         !std::isfinite(options.prior_reference_length_m)) {
-      throw std::invalid_argument("prior_reference_length_m must be finite and > 0");
+      *why = "prior_reference_length_m must be finite and > 0";
+      return std::numeric_limits<double>::quiet_NaN();
     }
     p0 = 1.0 - std::pow(0.5, options.cell_size_m / options.prior_reference_length_m);
   }
   if (!(p0 > 0.0 && p0 < 1.0)) {
-    throw std::invalid_argument("prior cell occupancy must lie in (0, 1)");
+    *why = "prior cell occupancy must lie in (0, 1)";
+    return std::numeric_limits<double>::quiet_NaN();
   }
   return p0;
+}
+
+}  // namespace
+
+double ResolvePriorCellOccupancy(const BeamGridOptions& options) {
+  std::string why;
+  const double p0 = PriorOf(options, &why);
+  if (std::isnan(p0)) throw std::invalid_argument(why);
+  return p0;
+}
+
+bool BeamGridOptions::IsValid(std::string* why) const {
+  std::string local;
+  std::string& out = why != nullptr ? *why : local;
+  if (!(cell_size_m >= kMinCellSizeM && cell_size_m <= kMaxCellSizeM)) {
+    out = "cell_size_m must lie in [0.0001, 1] m";
+    return false;
+  }
+  if (!(prior_cell_occupancy < 0.0 || (prior_cell_occupancy > 0.0 && prior_cell_occupancy < 1.0))) {
+    out = "prior_cell_occupancy must lie in (0, 1), or be negative (from the reference length)";
+    return false;
+  }
+  if (std::isnan(PriorOf(*this, &out))) {
+    // The explicit occupancy passed above: the reference length is bad, or the prior it gives
+    // at this cell size is 0 or 1.
+    if (out.rfind("prior_reference_length_m", 0) != 0) {
+      out =
+          "prior_reference_length_m gives a prior cell occupancy outside (0, 1) at this cell "
+          "size";
+    }
+    return false;
+  }
+  return true;
 }
 
 std::vector<double> FirstHitFromCells(const std::vector<double>& p_m) {

@@ -104,12 +104,10 @@ std::size_t DenseBeam::MemoryBytes() const {
   return sizeof(*this) + p_.capacity() * sizeof(double);
 }
 
-namespace detail {
-
-std::unique_ptr<BeamStore> MakeDenseBeamStore(std::shared_ptr<const BeamContext> context,
-                                              std::size_t beam_count) {
-  return std::make_unique<BeamStoreOf<DenseBeam>>(std::move(context), beam_count);
+// Instantiated here, next to DenseBeam::Update, which then inlines into UpdateMany.
+std::unique_ptr<BeamStore> detail::MakeDenseBeamStore(std::shared_ptr<const BeamContext> context,
+                                                      std::size_t beam_count) {
+  return std::make_unique<detail::BeamStoreOf<DenseBeam>>(std::move(context), beam_count);
 }
 
-}  // namespace detail
 }  // namespace fusion

@@ -486,12 +486,10 @@ double UllBeam::CompositeModelExact(const BeamContext& ctx, std::size_t index,
   return den > 0.0 ? num / den : model.Probability(c.first, outcome);
 }
 
-namespace detail {
-
-std::unique_ptr<BeamStore> MakeUllBeamStore(std::shared_ptr<const BeamContext> context,
-                                            std::size_t beam_count) {
-  return std::make_unique<BeamStoreOf<UllBeam>>(std::move(context), beam_count);
+// Instantiated here, next to UllBeam::Update, which then inlines into UpdateMany.
+std::unique_ptr<BeamStore> detail::MakeUllBeamStore(std::shared_ptr<const BeamContext> context,
+                                                    std::size_t beam_count) {
+  return std::make_unique<detail::BeamStoreOf<UllBeam>>(std::move(context), beam_count);
 }
 
-}  // namespace detail
 }  // namespace fusion
