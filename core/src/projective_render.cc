@@ -114,11 +114,8 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
   const detail::BeamPyramid pyramid(tess.cols(), tess.rows(), std::move(beams));
   RenderedGrid out(options.resolution_m);
   if (s.beams_rendered > 0) {
-    detail::Descent descent(grid, T_world_sensor, options, pyramid, masses.traced, t_start,
-                            global_far, skip, &out, &s);
-    Aggregate everything;
-    everything.touched = everything.beams = 1;
-    descent.VisitChildren(0, {0, 0, 0}, everything, /*free_through=*/false, descent.RootMap());
+    detail::DescendOctree(grid, T_world_sensor, options, pyramid, masses.traced, t_start,
+                          global_far, skip, &out, &s);
   }
   if (stats != nullptr) *stats = s;
   return out;
