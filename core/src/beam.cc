@@ -1,11 +1,16 @@
-// Beam representations: dense reference and unrolled linked list (paper Sec. II-C, IV-A).
+// What both beam representations share (paper Sec. II-C): the prior, Eqs. 7 and 8 on whole
+// beams, the per-sensor BeamContext, and the choice of store. The representations themselves:
+// dense_beam.cc (the oracle) and ull_beam.cc (the paper's unrolled linked list, Sec. IV-A).
 #include "fusion/core/beam.h"
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
+#include <limits>
 #include <stdexcept>
+#include <string>
 #include <utility>
+
+#include "beam_store_of.h"
 
 namespace fusion {
 namespace {
@@ -13,21 +18,55 @@ namespace {
 // Largest ULL factor table (entries); beyond it factors are computed on the fly.
 constexpr std::size_t kMaxTableEntries = std::size_t{1} << 25;
 
-}  // namespace
-
-double ResolvePriorCellOccupancy(const BeamGridOptions& options) {
+// The prior cell occupancy the options give (ResolvePriorCellOccupancy), or NaN with *why set.
+double PriorOf(const BeamGridOptions& options, std::string* why) {
   double p0 = options.prior_cell_occupancy;
   if (p0 < 0.0) {
     if (!(options.prior_reference_length_m > 0.0) ||
         !std::isfinite(options.prior_reference_length_m)) {
-      throw std::invalid_argument("prior_reference_length_m must be finite and > 0");
+      *why = "prior_reference_length_m must be finite and > 0";
+      return std::numeric_limits<double>::quiet_NaN();
     }
     p0 = 1.0 - std::pow(0.5, options.cell_size_m / options.prior_reference_length_m);
   }
   if (!(p0 > 0.0 && p0 < 1.0)) {
-    throw std::invalid_argument("prior cell occupancy must lie in (0, 1)");
+    *why = "prior cell occupancy must lie in (0, 1)";
+    return std::numeric_limits<double>::quiet_NaN();
   }
   return p0;
+}
+
+}  // namespace
+
+double ResolvePriorCellOccupancy(const BeamGridOptions& options) {
+  std::string why;
+  const double p0 = PriorOf(options, &why);
+  if (std::isnan(p0)) throw std::invalid_argument(why);
+  return p0;
+}
+
+bool BeamGridOptions::IsValid(std::string* why) const {
+  std::string local;
+  std::string& out = why != nullptr ? *why : local;
+  if (!(cell_size_m >= kMinCellSizeM && cell_size_m <= kMaxCellSizeM)) {
+    out = "cell_size_m must lie in [0.0001, 1] m";
+    return false;
+  }
+  if (!(prior_cell_occupancy < 0.0 || (prior_cell_occupancy > 0.0 && prior_cell_occupancy < 1.0))) {
+    out = "prior_cell_occupancy must lie in (0, 1), or be negative (from the reference length)";
+    return false;
+  }
+  if (std::isnan(PriorOf(*this, &out))) {
+    // The explicit occupancy passed above: the reference length is bad, or the prior it gives
+    // at this cell size is 0 or 1.
+    if (out.rfind("prior_reference_length_m", 0) != 0) {
+      out =
+          "prior_reference_length_m gives a prior cell occupancy outside (0, 1) at this cell "
+          "size";
+    }
+    return false;
+  }
+  return true;
 }
 
 std::vector<double> FirstHitFromCells(const std::vector<double>& p_m) {
@@ -60,11 +99,6 @@ std::vector<double> CellsFromFirstHit(const std::vector<double>& weights,
   }
   return p_m;
 }
-
-namespace {
-// Two doubles (SSE2 on x86-64, NEON on arm64) for the ROI update's inner loop.
-using V2 = double __attribute__((vector_size(16)));
-}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 // BeamContext
@@ -125,633 +159,15 @@ std::size_t BeamContext::MemoryBytes() const {
 }
 
 // ---------------------------------------------------------------------------------------------
-// DenseBeam
-
-DenseBeam::DenseBeam(const BeamContext& ctx) { Reset(ctx); }
-
-void DenseBeam::Reset(const BeamContext& ctx) {
-  const std::size_t n = ctx.cell_count();
-  p_.resize(n + 1);
-  // Eq. 7 with p(m_i) = p0 for every cell.
-  for (std::size_t i = 0; i < n; ++i) p_[i] = ctx.prior() * ctx.RhoPow(i);
-  p_[n] = ctx.RhoPow(n);
-  touched_ = false;
-}
-
-void DenseBeam::Update(const BeamContext& ctx, std::size_t outcome) {
-  const ForwardModel& model = ctx.model();
-  double sum = 0.0;
-  for (std::size_t i = 0; i < p_.size(); ++i) {
-    p_[i] *= model.Probability(i, outcome);  // Eq. 11 numerator
-    sum += p_[i];
-  }
-  touched_ = true;
-  if (!(sum > 0.0) || !std::isfinite(sum)) {  // impossible outcome under p(B): start afresh
-    Reset(ctx);
-    touched_ = true;
-    return;
-  }
-  const double eta = 1.0 / sum;  // Eq. 11 normaliser
-  for (double& p : p_) p *= eta;
-}
-
-void DenseBeam::Weights(const BeamContext& /*ctx*/, std::vector<double>* weights) const {
-  *weights = p_;
-}
-
-void DenseBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
-                           std::vector<double>* out) const {
-  out->assign(cells.size(), 0.0);
-  const std::size_t n = ctx.cell_count();
-  double acc = p_[n];
-  std::size_t i = n;
-  for (std::size_t j = cells.size(); j-- > 0;) {
-    const std::size_t target = std::min<std::size_t>(cells[j], n);
-    while (i > target) acc += p_[--i];
-    (*out)[j] = acc;
-  }
-}
-
-void DenseBeam::TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,
-                         std::vector<double>* out, double* total) const {
-  const std::size_t n = ctx.cell_count();
-  out->resize(last - first + 1);
-  double acc = p_[n];
-  for (std::size_t i = n; i-- > last;) acc += p_[i];  // S(last)
-  (*out)[last - first] = acc;
-  for (std::size_t c = last; c-- > first;) (*out)[c - first] = acc += p_[c];
-  for (std::size_t i = first; i-- > 0;) acc += p_[i];
-  *total = acc;
-}
-
-std::uint32_t DenseBeam::TailDropCell(const BeamContext& ctx, std::uint32_t from,
-                                      double fraction) const {
-  const std::size_t n = ctx.cell_count();
-  const std::size_t start = std::min<std::size_t>(from, n);
-  double tail_from = 0.0;
-  for (std::size_t i = n + 1; i-- > start;) tail_from += p_[i];
-  const double threshold = fraction * tail_from;
-  double acc = p_[n];
-  if (acc >= threshold) return static_cast<std::uint32_t>(n + 1);
-  for (std::size_t i = n; i-- > start;) {
-    acc += p_[i];
-    if (acc >= threshold) return static_cast<std::uint32_t>(i + 1);
-  }
-  return static_cast<std::uint32_t>(start + 1);  // fraction >= 1
-}
-
-BeamProfileCells DenseBeam::Profile(const BeamContext& ctx, std::uint32_t from,
-                                    double tail_fraction, double free_ratio) const {
-  const std::size_t n = ctx.cell_count();
-  const std::size_t start = std::min<std::size_t>(from, n);
-  std::vector<double> tail(n + 1);  // S(c), c in [0, N]
-  double acc = p_[n];
-  tail[n] = acc;
-  for (std::size_t i = n; i-- > 0;) tail[i] = acc += p_[i];
-  BeamProfileCells out;
-  out.info_end = TailDropCell(ctx, from, tail_fraction);
-  const double no_information = kNoInformationTail * tail[0];
-  std::size_t c = start;
-  while (c < n && tail[c] > no_information && p_[c] <= free_ratio * ctx.prior() * tail[c]) ++c;
-  out.mass_begin = static_cast<std::uint32_t>(c < n ? c : n + 1);
-  out.free_hazard = tail[start] > 0.0 && c > start ? -std::log(tail[c] / tail[start]) : 0.0;
-  out.median = TailDropCell(ctx, from, 0.5);
-  return out;
-}
-
-std::size_t DenseBeam::MemoryBytes() const {
-  return sizeof(*this) + p_.capacity() * sizeof(double);
-}
-
-// ---------------------------------------------------------------------------------------------
-// UllBeam
-
-UllBeam::UllBeam(const BeamContext& ctx) { Reset(ctx); }
-
-void UllBeam::Reset(const BeamContext& ctx) {
-  // Keeps the vectors' memory: a recycled grid's beams fill up again much as before.
-  list_.clear();
-  pool_.clear();
-  const std::size_t n = ctx.cell_count();
-  const std::size_t visible = std::min(ctx.disc().first_visible_cell, n);
-  // Split at the r_min boundary: blind and visible cells see different constant models.
-  if (visible > 0) {
-    list_.push_back({0, static_cast<std::uint32_t>(visible), 0, 0, ctx.prior()});
-  }
-  if (visible < n) {
-    list_.push_back({static_cast<std::uint32_t>(visible), static_cast<std::uint32_t>(n - visible),
-                     0, 0, ctx.prior() * ctx.RhoPow(visible)});
-  }
-  w_all_free_ = ctx.RhoPow(n);
-  total_ = w_all_free_;
-  ec_first_ = ec_end_ = ec_pool_ = 0;
-  for (const Composite& c : list_) total_ += CompositeSum(ctx, c);
-  touched_ = false;
-}
-
-std::size_t UllBeam::Find(std::size_t cell) const {
-  auto it = std::upper_bound(list_.begin(), list_.end(), cell,
-                             [](std::size_t value, const Composite& c) { return value < c.first; });
-  return static_cast<std::size_t>(it - list_.begin()) - 1;
-}
-
-double UllBeam::CompositeSum(const BeamContext& ctx, const Composite& c) const {
-  if (c.exploded == 0) return c.w_first * ctx.GeomSum(c.count);
-  double s = 0.0;
-  for (std::uint32_t t = c.count; t-- > 0;) s += pool_[c.pool_begin + t];
-  return s;
-}
-
-std::size_t UllBeam::Explode(const BeamContext& ctx, std::size_t begin, std::size_t end) {
-  const std::size_t hit = Find(begin);
-  if (list_[hit].exploded != 0 && std::size_t{list_[hit].first} + list_[hit].count >= end) {
-    return hit;  // steady state: the ROI already lies in one EC
-  }
-  std::size_t pos = begin;
-  while (pos < end) {
-    std::size_t idx = Find(pos);
-    const Composite c = list_[idx];
-    const std::size_t c_end = std::size_t{c.first} + c.count;
-    if (c.exploded != 0) {
-      pos = c_end;
-      continue;
-    }
-    // Split the UEC into [c.first, a) UEC, [a, b) EC, [b, c_end) UEC.
-    const std::size_t a = pos;
-    const std::size_t b = std::min(c_end, end);
-    const std::uint32_t len = static_cast<std::uint32_t>(b - a);
-    const std::uint32_t at = c.pool_begin;
-    pool_.insert(pool_.begin() + at, len, 0.0);
-    for (std::uint32_t t = 0; t < len; ++t) {
-      pool_[at + t] = c.w_first * ctx.RhoPow(a + t - c.first);
-    }
-    for (std::size_t k = idx + 1; k < list_.size(); ++k) list_[k].pool_begin += len;
-    Composite pieces[3];
-    std::size_t count = 0;
-    if (a > c.first) {
-      pieces[count++] = {c.first, static_cast<std::uint32_t>(a - c.first), at, 0, c.w_first};
-    }
-    const std::size_t ec = idx + count;
-    pieces[count++] = {static_cast<std::uint32_t>(a), len, at, 1, 0.0};
-    if (b < c_end) {
-      pieces[count++] = {static_cast<std::uint32_t>(b), static_cast<std::uint32_t>(c_end - b),
-                         at + len, 0, c.w_first * ctx.RhoPow(b - c.first)};
-    }
-    list_[idx] = pieces[0];
-    list_.insert(list_.begin() + static_cast<std::ptrdiff_t>(idx) + 1, pieces + 1, pieces + count);
-    // Merge with EC neighbours (their pool values are adjacent: the pool is in list order).
-    std::size_t e = ec;
-    if (e + 1 < list_.size() && list_[e + 1].exploded != 0) {
-      list_[e].count += list_[e + 1].count;
-      list_.erase(list_.begin() + static_cast<std::ptrdiff_t>(e) + 1);
-    }
-    if (e > 0 && list_[e - 1].exploded != 0) {
-      list_[e - 1].count += list_[e].count;
-      list_.erase(list_.begin() + static_cast<std::ptrdiff_t>(e));
-    }
-    pos = b;
-  }
-  return Find(begin);
-}
-
-void UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
-  if (!touched_) {
-    // Blind cells have p(r | B_i) = 0 for every outcome: the first reading zeroes them.
-    const std::size_t visible = ctx.disc().first_visible_cell;
-    for (Composite& c : list_) {
-      if (c.first >= visible) break;
-      total_ -= CompositeSum(ctx, c);
-      c.w_first = 0.0;
-      for (std::uint32_t t = 0; c.exploded != 0 && t < c.count; ++t) pool_[c.pool_begin + t] = 0;
-    }
-    touched_ = true;
-  }
-  double delta = 0.0;
-  const BeamContext::RoiFactors roi = ctx.Roi(outcome);
-  if (roi.end > roi.begin) {
-    if (!(roi.begin >= ec_first_ && roi.end <= ec_end_)) {
-      const Composite& c = list_[Explode(ctx, roi.begin, roi.end)];
-      ec_first_ = c.first;
-      ec_end_ = c.first + c.count;
-      ec_pool_ = c.pool_begin;
-    }
-    double* v = pool_.data() + ec_pool_ + (roi.begin - ec_first_);
-    const std::size_t len = roi.end - roi.begin;
-    if (roi.factors != nullptr) {
-      // delta = sum_t v_t (f_t - 1), four independent sums (two 2-lane vectors) to break the
-      // add chain; the pool and the factor table never overlap.
-      const double* f = roi.factors;
-      V2 d01 = {0.0, 0.0};
-      V2 d23 = {0.0, 0.0};
-      const V2 one = {1.0, 1.0};
-      std::size_t t = 0;
-      for (; t + 4 <= len; t += 4) {
-        V2 a, b, fa, fb;
-        std::memcpy(&a, v + t, sizeof a);
-        std::memcpy(&b, v + t + 2, sizeof b);
-        std::memcpy(&fa, f + t, sizeof fa);
-        std::memcpy(&fb, f + t + 2, sizeof fb);
-        d01 += a * (fa - one);
-        d23 += b * (fb - one);
-        a *= fa;
-        b *= fb;
-        std::memcpy(v + t, &a, sizeof a);
-        std::memcpy(v + t + 2, &b, sizeof b);
-      }
-      double tail = 0.0;
-      for (; t < len; ++t) {
-        const double old = v[t];
-        v[t] = old * f[t];
-        tail += old * (f[t] - 1.0);
-      }
-      delta = ((d01[0] + tail) + d01[1]) + (d23[0] + d23[1]);
-    } else {
-      for (std::size_t t = 0; t < len; ++t) {
-        const double old = v[t];
-        v[t] = old * ctx.Factor(roi.begin + t, outcome);
-        delta += v[t] - old;
-      }
-    }
-  }
-  const double g = ctx.AllFreeFactor(outcome);
-  const double old_free = w_all_free_;
-  w_all_free_ *= g;
-  delta += w_all_free_ - old_free;
-  total_ += delta;
-  if (!(total_ >= kLowTotal && total_ <= kHighTotal)) Renormalise(ctx);
-}
-
-void UllBeam::Renormalise(const BeamContext& ctx) {
-  double exact = w_all_free_;
-  for (const Composite& c : list_) exact += CompositeSum(ctx, c);
-  if (!(exact > 0.0) || !std::isfinite(exact)) {  // impossible outcome: start afresh
-    Reset(ctx);
-    touched_ = true;
-    return;
-  }
-  const double scale = 1.0 / exact;
-  for (Composite& c : list_) c.w_first *= scale;
-  for (double& v : pool_) v *= scale;
-  w_all_free_ *= scale;
-  total_ = 1.0;
-}
-
-void UllBeam::Weights(const BeamContext& ctx, std::vector<double>* weights) const {
-  const std::size_t n = ctx.cell_count();
-  weights->resize(n + 1);
-  for (const Composite& c : list_) {
-    for (std::uint32_t t = 0; t < c.count; ++t) {
-      (*weights)[c.first + t] =
-          c.exploded != 0 ? pool_[c.pool_begin + t] : c.w_first * ctx.RhoPow(t);
-    }
-  }
-  (*weights)[n] = w_all_free_;
-}
-
-std::uint32_t UllBeam::TailDropCell(const BeamContext& ctx, std::uint32_t from,
-                                    double fraction) const {
-  const std::size_t n = ctx.cell_count();
-  const auto none = static_cast<std::uint32_t>(n + 1);
-  const std::uint32_t start = std::min<std::uint32_t>(from, static_cast<std::uint32_t>(n));
-  thread_local std::vector<std::uint32_t> cells(1);
-  thread_local std::vector<double> tails;
-  cells.assign(1, start);
-  TailMasses(ctx, cells, &tails);
-  const double threshold = fraction * tails[0];
-  double acc = w_all_free_;  // S(N)
-  if (acc >= threshold) return none;
-  for (std::size_t k = list_.size(); k-- > 0;) {
-    const Composite& c = list_[k];
-    const std::size_t c_end = std::size_t{c.first} + c.count;
-    if (c.exploded == 0) {
-      const double sum = c.w_first * ctx.GeomSum(c.count);
-      if (acc + sum < threshold) {
-        acc += sum;
-        continue;
-      }
-      // S(x) = acc + w_first rho^(x - first) GeomSum(c_end - x) falls with x: the largest x
-      // with S(x) >= threshold, by bisection ([lo] holds, (hi] does not).
-      std::size_t lo = c.first, hi = c_end;
-      while (hi - lo > 1) {
-        const std::size_t mid = lo + (hi - lo) / 2;
-        const double s_mid = acc + c.w_first * ctx.RhoPow(mid - c.first) * ctx.GeomSum(c_end - mid);
-        (s_mid >= threshold ? lo : hi) = mid;
-      }
-      return static_cast<std::uint32_t>(std::max<std::size_t>(lo + 1, start + 1));
-    }
-    for (std::size_t t = c.count; t-- > 0;) {
-      acc += pool_[c.pool_begin + t];
-      if (acc >= threshold) {
-        return static_cast<std::uint32_t>(std::max<std::size_t>(c.first + t + 1, start + 1));
-      }
-    }
-  }
-  return static_cast<std::uint32_t>(start + 1);  // fraction >= 1
-}
-
-BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from,
-                                  double tail_fraction, double free_ratio) const {
-  const std::size_t n = ctx.cell_count();
-  const std::size_t start = std::min<std::size_t>(from, n);
-  // S at the start of every composite (s_at[k]), and after the last one (B_{N+1} alone). The
-  // usual beam has one EC: its sum is the running total less the closed-form rest, unless that
-  // would cancel (a small EC next to large runs), so the profile costs a few cells of it only.
-  constexpr std::size_t kLocal = 32;
-  double s_local[kLocal + 1];
-  thread_local std::vector<double> s_heap;
-  double* s_at = s_local;
-  if (list_.size() + 1 > kLocal + 1) {
-    s_heap.resize(list_.size() + 1);
-    s_at = s_heap.data();
-  }
-  double closed = w_all_free_;
-  std::size_t ecs = 0;
-  for (const Composite& c : list_) {
-    if (c.exploded == 0) {
-      closed += c.w_first * ctx.GeomSum(c.count);
-    } else {
-      ++ecs;
-    }
-  }
-  const double derived_ec = total_ - closed;
-  const bool derive = ecs == 1 && derived_ec > 1e-6 * total_;
-  double acc = w_all_free_;
-  s_at[list_.size()] = acc;
-  for (std::size_t k = list_.size(); k-- > 0;) {
-    const Composite& c = list_[k];
-    s_at[k] = acc += (c.exploded != 0 && derive) ? derived_ec : CompositeSum(ctx, c);
-  }
-  const double no_information = kNoInformationTail * s_at[0];
-  BeamProfileCells out;
-  out.mass_begin = static_cast<std::uint32_t>(n + 1);
-  const double ratio = free_ratio * ctx.prior();
-  double s_start = -1.0;       // S(start)
-  double s_end = w_all_free_;  // S where the free zone ends
-  bool found = false;
-  for (std::size_t k = 0; k < list_.size() && !found; ++k) {
-    const Composite& c = list_[k];
-    const std::size_t c_end = std::size_t{c.first} + c.count;
-    if (c_end <= start) continue;
-    const std::size_t j0 = std::max<std::size_t>(c.first, start);
-    if (c.exploded == 0) {
-      const double w = c.w_first * ctx.RhoPow(j0 - c.first);
-      const double s = s_at[k + 1] + w * ctx.GeomSum(c_end - j0);
-      if (s_start < 0.0) s_start = s;
-      if (s <= no_information || w > ratio * s) {
-        out.mass_begin = static_cast<std::uint32_t>(j0);
-        s_end = s;
-        found = true;
-      }
-      continue;  // below p0 the run's p(m) only falls: no cell of it reaches the ratio
-    }
-    double s = s_at[k];
-    for (std::size_t t = 0; t < j0 - c.first; ++t) s -= pool_[c.pool_begin + t];
-    for (std::size_t j = j0; j < c_end; ++j) {
-      if (s_start < 0.0) s_start = s;
-      const double w = pool_[c.pool_begin + (j - c.first)];
-      if (s <= no_information || w > ratio * s) {
-        out.mass_begin = static_cast<std::uint32_t>(j);
-        s_end = s;
-        found = true;
-        break;
-      }
-      s -= w;
-    }
-  }
-  if (s_start < 0.0) s_start = w_all_free_;  // start == N
-  out.free_hazard =
-      s_start > 0.0 && out.mass_begin > start ? -std::log(std::max(s_end, 0.0) / s_start) : 0.0;
-  if (!std::isfinite(out.free_hazard)) out.free_hazard = 0.0;
-  // Information end and median (TailDropCell): the composite where S falls below the
-  // threshold, then the cell inside it.
-  const auto first_below = [&](double fraction) -> std::uint32_t {
-    const double threshold = fraction * s_start;
-    if (w_all_free_ >= threshold) return static_cast<std::uint32_t>(n + 1);
-    std::size_t k = list_.size();
-    while (k > 0 && s_at[k - 1] < threshold) --k;
-    std::size_t cell = start + 1;  // S(start) itself is below: fraction > 1
-    if (k > 0) {
-      const Composite& c = list_[k - 1];
-      const std::size_t c_end = std::size_t{c.first} + c.count;
-      if (c.exploded == 0) {
-        // S(x) = s_at[k] + w_first rho^(x - first) GeomSum(c_end - x) falls with x: the largest
-        // x with S(x) >= threshold, by bisection ([lo] holds, (hi] does not).
-        std::size_t lo = c.first, hi = c_end;
-        while (hi - lo > 1) {
-          const std::size_t mid = lo + (hi - lo) / 2;
-          const double s_mid =
-              s_at[k] + c.w_first * ctx.RhoPow(mid - c.first) * ctx.GeomSum(c_end - mid);
-          (s_mid >= threshold ? lo : hi) = mid;
-        }
-        cell = lo + 1;
-      } else {
-        double tail = s_at[k];
-        std::size_t t = c.count;
-        while (t > 0) {
-          tail += pool_[c.pool_begin + --t];
-          if (tail >= threshold) break;
-        }
-        cell = c.first + t + 1;
-      }
-    }
-    return static_cast<std::uint32_t>(std::max(cell, start + 1));
-  };
-  out.info_end = first_below(tail_fraction);
-  out.median = first_below(0.5);
-  return out;
-}
-
-void UllBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
-                         std::vector<double>* out) const {
-  out->assign(cells.size(), 0.0);
-  const std::size_t n = ctx.cell_count();
-  double acc = w_all_free_;
-  std::size_t j = cells.size();
-  while (j > 0 && cells[j - 1] >= n) (*out)[--j] = acc;
-  for (std::size_t k = list_.size(); k-- > 0;) {
-    const Composite& c = list_[k];
-    const std::size_t c_end = std::size_t{c.first} + c.count;
-    if (c.exploded == 0) {
-      while (j > 0 && cells[j - 1] >= c.first) {
-        const std::size_t from = std::min<std::size_t>(cells[j - 1], c_end);
-        (*out)[--j] = acc + c.w_first * ctx.RhoPow(from - c.first) * ctx.GeomSum(c_end - from);
-      }
-      acc += c.w_first * ctx.GeomSum(c.count);
-    } else {
-      double part = 0.0;
-      std::size_t t = c.count;
-      while (j > 0 && cells[j - 1] >= c.first) {
-        const std::size_t target = std::min<std::size_t>(cells[j - 1], c_end) - c.first;
-        while (t > target) part += pool_[c.pool_begin + --t];
-        (*out)[--j] = acc + part;
-      }
-      while (t > 0) part += pool_[c.pool_begin + --t];
-      acc += part;
-    }
-  }
-  while (j > 0) (*out)[--j] = acc;
-}
-
-void UllBeam::TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,
-                       std::vector<double>* out, double* total) const {
-  const auto n = static_cast<std::int64_t>(ctx.cell_count());
-  const auto lo = static_cast<std::int64_t>(first);
-  out->resize(last - first + 1);
-  double* o = out->data();  // o[c - lo] = S(c)
-  double acc = w_all_free_;  // S(end of the composite being walked)
-  std::int64_t c = last;     // the next cell to write, walking down
-  for (; c >= lo && c >= n; --c) o[c - lo] = acc;
-  for (std::size_t k = list_.size(); k-- > 0;) {
-    const Composite& comp = list_[k];
-    const std::int64_t begin = comp.first;
-    if (c < lo || c < begin) {  // the composite lies above the span (or below: then only sums)
-      acc += CompositeSum(ctx, comp);
-      continue;
-    }
-    const std::int64_t bottom = std::max(lo, begin);
-    if (comp.exploded == 0) {
-      // S(x) = S(end) + w (GeomSum(count) - GeomSum(x - begin)): no dependency between cells.
-      const double top = acc + comp.w_first * ctx.GeomSum(comp.count);
-      const double* geom = ctx.GeomSums();
-      for (std::int64_t x = bottom; x <= c; ++x) o[x - lo] = top - comp.w_first * geom[x - begin];
-      acc = top;
-    } else {
-      // A running sum from the composite's end down through the span, then on to its start.
-      const double* pool = pool_.data() + comp.pool_begin;
-      double part = 0.0;
-      for (std::int64_t t = comp.count; t-- > c + 1 - begin;) part += pool[t];
-      for (std::int64_t x = c; x >= bottom; --x) {
-        part += pool[x - begin];
-        o[x - lo] = acc + part;
-      }
-      for (std::int64_t t = bottom - begin; t-- > 0;) part += pool[t];
-      acc += part;
-    }
-    c = bottom - 1;
-  }
-  for (; c >= lo; --c) o[c - lo] = acc;
-  *total = acc;
-}
-
-void UllBeam::Prefetch() const {
-  // The composite list and the start of the EC pool (an ROI is typically ~1 KB of doubles).
-  __builtin_prefetch(list_.data());
-  const char* pool = reinterpret_cast<const char*>(pool_.data());
-  const std::size_t bytes = std::min<std::size_t>(pool_.size() * sizeof(double), 1536);
-  for (std::size_t at = 0; at < bytes; at += 64) __builtin_prefetch(pool + at, 1);
-}
-
-std::size_t UllBeam::MemoryBytes() const {
-  return sizeof(*this) + list_.capacity() * sizeof(Composite) + pool_.capacity() * sizeof(double);
-}
-
-double UllBeam::CompositeModel(const BeamContext& ctx, std::size_t index,
-                               std::size_t outcome) const {
-  const Composite& c = list_.at(index);
-  if (c.exploded != 0) return CompositeModelExact(ctx, index, outcome);
-  const ForwardModel& model = ctx.model();
-  const std::size_t first = c.first;
-  const std::size_t last = first + c.count - 1;
-  if (c.count == 1) return model.Probability(first, outcome);
-  // Weights relative to w_first (the common factor cancels in the ratio).
-  if (c.count == 2) {
-    const double wa = 1.0;
-    const double wb = ctx.RhoPow(1);
-    return (wa * model.Probability(first, outcome) + wb * model.Probability(last, outcome)) /
-           (wa + wb);
-  }
-  const std::size_t mid = first + (c.count - 1) / 2;
-  const double wa = 1.0;
-  const double wm = 4.0 * ctx.RhoPow(mid - first);
-  const double wb = ctx.RhoPow(last - first);
-  const double norm = wa + wm + wb;
-  if (!(norm > 0.0)) return model.Probability(first, outcome);
-  return (wa * model.Probability(first, outcome) + wm * model.Probability(mid, outcome) +
-          wb * model.Probability(last, outcome)) /
-         norm;
-}
-
-double UllBeam::CompositeModelExact(const BeamContext& ctx, std::size_t index,
-                                    std::size_t outcome) const {
-  const Composite& c = list_.at(index);
-  const ForwardModel& model = ctx.model();
-  double num = 0.0;
-  double den = 0.0;
-  for (std::uint32_t t = 0; t < c.count; ++t) {
-    const double w = c.exploded != 0 ? pool_[c.pool_begin + t] : ctx.RhoPow(t);
-    num += w * model.Probability(c.first + t, outcome);
-    den += w;
-  }
-  return den > 0.0 ? num / den : model.Probability(c.first, outcome);
-}
-
-// ---------------------------------------------------------------------------------------------
 // BeamStore
-
-namespace {
-
-template <class Beam>
-class BeamStoreOf final : public BeamStore {
- public:
-  BeamStoreOf(std::shared_ptr<const BeamContext> ctx, std::size_t beams) : ctx_(std::move(ctx)) {
-    beams_.reserve(beams);
-    for (std::size_t b = 0; b < beams; ++b) beams_.emplace_back(*ctx_);
-  }
-  std::size_t beam_count() const override { return beams_.size(); }
-  void Update(std::size_t beam, std::size_t outcome) override {
-    beams_[beam].Update(*ctx_, outcome);
-  }
-  void UpdateMany(const BeamOutcome* updates, std::size_t count) override {
-    constexpr std::size_t kAhead = 4;
-    for (std::size_t k = 0; k < count && k < kAhead; ++k) beams_[updates[k].beam].Prefetch();
-    for (std::size_t k = 0; k < count; ++k) {
-      if (k + kAhead < count) beams_[updates[k + kAhead].beam].Prefetch();
-      beams_[updates[k].beam].Update(*ctx_, updates[k].outcome);
-    }
-  }
-  void Weights(std::size_t beam, std::vector<double>* weights) const override {
-    beams_[beam].Weights(*ctx_, weights);
-  }
-  void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
-                  std::vector<double>* out) const override {
-    beams_[beam].TailMasses(*ctx_, cells, out);
-  }
-  void TailSpan(std::size_t beam, std::uint32_t first, std::uint32_t last,
-                std::vector<double>* out, double* total) const override {
-    beams_[beam].TailSpan(*ctx_, first, last, out, total);
-  }
-  std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,
-                             double fraction) const override {
-    return beams_[beam].TailDropCell(*ctx_, from, fraction);
-  }
-  BeamProfileCells Profile(std::size_t beam, std::uint32_t from, double tail_fraction,
-                           double free_ratio) const override {
-    return beams_[beam].Profile(*ctx_, from, tail_fraction, free_ratio);
-  }
-  bool Touched(std::size_t beam) const override { return beams_[beam].touched(); }
-  void Reset() override {
-    for (Beam& b : beams_) b.Reset(*ctx_);
-  }
-  std::size_t MemoryBytes() const override {
-    std::size_t bytes = sizeof(*this) + (beams_.capacity() - beams_.size()) * sizeof(Beam);
-    for (const Beam& b : beams_) bytes += b.MemoryBytes();
-    return bytes;
-  }
-
- private:
-  std::shared_ptr<const BeamContext> ctx_;
-  std::vector<Beam> beams_;
-};
-
-}  // namespace
 
 std::unique_ptr<BeamStore> MakeBeamStore(BeamRepresentation representation,
                                          std::shared_ptr<const BeamContext> context,
                                          std::size_t beam_count) {
   if (representation == BeamRepresentation::kDense) {
-    return std::make_unique<BeamStoreOf<DenseBeam>>(std::move(context), beam_count);
+    return detail::MakeDenseBeamStore(std::move(context), beam_count);
   }
-  return std::make_unique<BeamStoreOf<UllBeam>>(std::move(context), beam_count);
+  return detail::MakeUllBeamStore(std::move(context), beam_count);
 }
 
 }  // namespace fusion

@@ -6,10 +6,11 @@
 #include <limits>
 #include <thread>
 
+#include "fusion/core/voxel_traversal.h"
+
 namespace fusion::detail {
 namespace {
 
-constexpr int kTreeMaxVal = 32768;  // octomap tree_max_val for depth 16
 constexpr std::size_t kChunkSegments = 256;
 constexpr std::size_t kRowsPerBlock = 4;
 constexpr double kProbabilityFloor = 1e-9;
@@ -21,10 +22,6 @@ double Logit(double p) {
   p = std::clamp(p, kProbabilityFloor, 1.0 - kProbabilityFloor);
   return std::log(p / (1.0 - p));
 }
-
-// Voxel index (world / resolution, floored) inside OctoMap's key range: keys are uint16 around
-// tree_max_val, so an index outside [-32768, 32767] would wrap to the far side of the map.
-bool InKeyRange(long index) { return index >= -kTreeMaxVal && index < kTreeMaxVal; }
 
 // Offset of sub-ray i of k across a beam, in beam widths (-0.5, 0.5).
 double SubOffset(int i, int k) { return (i + 0.5) / k - 0.5; }
@@ -64,8 +61,8 @@ BeamTracer::BeamTracer(const BeamGrid& grid, const Eigen::Isometry3d& T_world_se
       t_start_(StartOf(grid)),
       t_end_(std::min(static_cast<double>(grid.cells_per_beam()) * grid.options().cell_size_m,
                       options.max_range_m)),
-      width_rad_(std::max(grid.tessellation().beam_width_h_rad(),
-                          grid.tessellation().beam_width_v_rad())),
+      width_rad_(
+          std::max(grid.tessellation().beam_width_h_rad(), grid.tessellation().beam_width_v_rad())),
       cell_m_(grid.options().cell_size_m),
       inv_res_(1.0 / options.resolution_m),
       continuity_(1.0 / std::tan(std::clamp(options.min_incidence_deg, 0.1, 89.0) * kPi / 180.0)) {
@@ -83,9 +80,9 @@ double BeamTracer::PriorLogOddsOfCells(long n) {
   return v;
 }
 
-double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_ref,
-                         double t_first, double shift, float weight_scale,
-                         std::vector<Segment>* out, double info_end_m) {
+double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_ref, double t_first,
+                         double shift, float weight_scale, std::vector<Segment>* out,
+                         double info_end_m) {
   // The distribution is read at u = t - shift; its blind cells (u < r_min) never are.
   t_ref = std::max(t_ref, t_start_ + std::max(shift, 0.0));
   if (!(t_end_ > t_ref)) return t_ref;
@@ -97,33 +94,11 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
   const double t_last_entry = std::min(t_end_, info_end_m + shift + cell_m_);
   t_first = std::max(t_first, t_ref);
   if (t_first >= t_last_entry) return t_last_entry;
-  const double res = options_.resolution_m;
-  const Eigen::Vector3d p0 = origin_ + dir * t_first;
-  long index[3];
-  int step[3];
-  double t_max[3];
-  double t_delta[3];
-  double t_entry = t_ref;  // where the ray enters the voxel holding p0 (not before t_ref)
-  for (int a = 0; a < 3; ++a) {
-    index[a] = static_cast<long>(std::floor(p0[a] * inv_res_));
-    if (dir[a] > 0.0) {
-      step[a] = 1;
-      t_max[a] = t_first + ((index[a] + 1) * res - p0[a]) / dir[a];
-      t_delta[a] = res / dir[a];
-      t_entry = std::max(t_entry, t_first + (index[a] * res - p0[a]) / dir[a]);
-    } else if (dir[a] < 0.0) {
-      step[a] = -1;
-      t_max[a] = t_first + (index[a] * res - p0[a]) / dir[a];
-      t_delta[a] = -res / dir[a];
-      t_entry = std::max(t_entry, t_first + ((index[a] + 1) * res - p0[a]) / dir[a]);
-    } else {
-      step[a] = 0;
-      t_max[a] = std::numeric_limits<double>::infinity();
-      t_delta[a] = std::numeric_limits<double>::infinity();
-    }
-  }
+  VoxelTraversal walk(origin_, dir, t_first, options_.resolution_m);
   // A ray that starts outside the map's key range writes nothing (it never wraps around).
-  if (!InKeyRange(index[0]) || !InKeyRange(index[1]) || !InKeyRange(index[2])) return t_first;
+  if (!walk.InsideKeyRange()) return t_first;
+  // Where the ray enters the voxel holding p(t_first), not before t_ref.
+  const double t_entry = std::max(t_ref, walk.EntryRange());
   double t_in = std::min(t_entry, t_first);
   // The mass the ray has left behind it since t_ref, as a trace from t_ref would have counted it.
   double remaining_mass = 1.0;
@@ -140,17 +115,12 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
     keys_.clear();
     boundaries_.push_back(t_in);
     while (keys_.size() < kChunkSegments && t_in < t_last_entry && !left_map) {
-      const int axis =
-          (t_max[0] < t_max[1]) ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
-      const double t_out = std::min(t_max[axis], t_end_);
-      keys_.emplace_back(static_cast<octomap::key_type>(index[0] + kTreeMaxVal),
-                         static_cast<octomap::key_type>(index[1] + kTreeMaxVal),
-                         static_cast<octomap::key_type>(index[2] + kTreeMaxVal));
+      const int axis = walk.NextAxis();
+      const double t_out = std::min(walk.ExitRange(axis), t_end_);
+      keys_.push_back(walk.Key());
       boundaries_.push_back(t_out);
       t_in = t_out;
-      index[axis] += step[axis];
-      t_max[axis] += t_delta[axis];
-      left_map = !InKeyRange(index[axis]);
+      left_map = !walk.Step(axis);
     }
     if (keys_.empty()) break;
     if (shift != 0.0) {
@@ -216,6 +186,10 @@ double BeamTracer::InformationEnd(std::size_t beam, double from_m) {
 
 double BeamTracer::VoxelEntry(const Eigen::Vector3d& dir, double r) const {
   if (!(r > t_start_)) return t_start_;
+  // VoxelTraversal's index and faces, though not its arithmetic for the far face (lo + res, not
+  // (index + 1) * res): the centre ray's segments kept before the sub-rays start are those that
+  // end at or before this range, which they often do exactly, so a last-bit change here changes
+  // which segments a render keeps.
   const Eigen::Vector3d p = origin_ + dir * r;
   double t = t_start_;
   for (int a = 0; a < 3; ++a) {
@@ -256,8 +230,23 @@ void BeamTracer::SurfaceSteps(std::size_t beam, const BeamProfile& profile, doub
   if (row + 1 < rows) *down = SurfaceStep(beam, b + cols, tess.beam_width_v_rad());
 }
 
-BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only,
-                                std::vector<Segment>* out) {
+void BeamTracer::TabulateMass(std::size_t beam, const BeamProfile& profile, double reach_m) {
+  // Every ray of the beam reads the same stretch: from a voxel before where the mass starts
+  // (moved by the nearest sub-ray's shift) to a voxel after where it ends (the farthest shift).
+  const double margin = 2.0 * options_.resolution_m + cell_m_;
+  const double end = std::isfinite(profile.info_end_m) ? profile.info_end_m : t_end_;
+  const std::uint32_t lo = grid_.CellOf(profile.mass_begin_m - reach_m - margin);
+  const std::uint32_t hi = grid_.CellOf(end + reach_m + margin);
+  if (hi > lo && hi - lo <= kMaxTableCells) {
+    grid_.TailMassSpan(beam, lo, hi, &table_.tails, &table_.total);
+    table_.beam = beam;
+    table_.first = lo;
+    table_.last = lo + static_cast<std::uint32_t>(table_.tails.size()) - 1;
+    table_.valid = true;
+  }
+}
+
+BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only, std::vector<Segment>* out) {
   const BeamTessellation& tess = grid_.tessellation();
   const BeamProfile& profile = profiles_[beam];
   const double mass_begin = profile.mass_begin_m;
@@ -272,21 +261,9 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only,
   double left = 0.0, right = 0.0, up = 0.0, down = 0.0;
   SurfaceSteps(beam, profile, &left, &right, &up, &down);
   if (first_mass_only && std::isfinite(mass_begin)) {
-    // Every ray of the beam reads the same stretch: from a voxel before where the mass starts
-    // (moved by the nearest sub-ray's shift) to a voxel after where it ends (the farthest shift).
-    const double reach = 0.5 * (std::max(std::abs(left), std::abs(right)) +
-                                std::max(std::abs(up), std::abs(down)));
-    const double margin = 2.0 * options_.resolution_m + cell_m_;
-    const double end = std::isfinite(profile.info_end_m) ? profile.info_end_m : t_end_;
-    const std::uint32_t lo = grid_.CellOf(mass_begin - reach - margin);
-    const std::uint32_t hi = grid_.CellOf(end + reach + margin);
-    if (hi > lo && hi - lo <= kMaxTableCells) {
-      grid_.TailMassSpan(beam, lo, hi, &table_.tails, &table_.total);
-      table_.beam = beam;
-      table_.first = lo;
-      table_.last = lo + static_cast<std::uint32_t>(table_.tails.size()) - 1;
-      table_.valid = true;
-    }
+    const double reach =
+        0.5 * (std::max(std::abs(left), std::abs(right)) + std::max(std::abs(up), std::abs(down)));
+    TabulateMass(beam, profile, reach);
   }
   const double t_stop =
       Trace(beam, dir, t_start_, first(t_start_, 0.0), 0.0, 1.0f, out, profile.info_end_m);

@@ -87,6 +87,9 @@ class BeamTracer {
   void Occupancies(std::size_t beam, const std::vector<double>& boundaries_m,
                    std::vector<double>* out);
   double InformationEnd(std::size_t beam, double from_m);
+  // Fills table_ with S over the stretch of beam b that its rays read when they trace only the
+  // first-hit mass (profile.mass_begin_m on), sub-rays shifted by up to reach_m included.
+  void TabulateMass(std::size_t beam, const BeamProfile& profile, double reach_m);
 
   // S over one stretch of the beam being traced (BeamGrid::TailMassSpan).
   struct Table {
@@ -110,7 +113,7 @@ class BeamTracer {
   double t_end_;
   double width_rad_;
   double cell_m_;
-  double inv_res_;
+  double inv_res_;     // as VoxelTraversal floors a point's index
   double continuity_;  // tan of the shallowest incidence still followed across beams, inverted
   std::vector<double> prior_cache_;
   std::vector<double> boundaries_;

@@ -47,6 +47,10 @@ double Phi(double x) { return 0.5 * std::erfc(-x * kInvSqrt2); }
 
 }  // namespace
 
+std::size_t CellsPerBeam(double r_max_m, double cell_size_m) {
+  return CeilCount(r_max_m, cell_size_m);
+}
+
 double NormalDensity(double r, double mu, double sigma) {
   const double z = (r - mu) / sigma;
   return kInvSqrt2Pi / sigma * std::exp(-0.5 * z * z);
@@ -77,7 +81,7 @@ Paper3dModel::Paper3dModel(const SensorSpec& spec, double cell_size_m) {
   delta_sigmas_ = spec.delta;
   BeamDiscretisation& d = disc_;
   d.cell_size_m = cell_size_m;
-  d.cell_count = CeilCount(spec.r_max_m, cell_size_m);
+  d.cell_count = CellsPerBeam(spec.r_max_m, cell_size_m);
   d.first_visible_cell = FirstVisibleCell(spec.r_min_m, cell_size_m, d.cell_count);
   const std::size_t n = d.cell_count;
   mu_m_.resize(n);
@@ -168,7 +172,7 @@ ClassicBeamModel::ClassicBeamModel(const SensorSpec& spec, double cell_size_m) {
   p_.z_rand /= sum;
   BeamDiscretisation& d = disc_;
   d.cell_size_m = cell_size_m;
-  d.cell_count = CeilCount(spec.r_max_m, cell_size_m);
+  d.cell_count = CellsPerBeam(spec.r_max_m, cell_size_m);
   d.first_visible_cell = FirstVisibleCell(spec.r_min_m, cell_size_m, d.cell_count);
   d.r_limit_m = spec.r_max_m;  // z_max_range
   d.bin_count = CeilCount(spec.r_max_m, cell_size_m);

@@ -1,13 +1,14 @@
 #include "fusion/core/local_grid.h"
 
-#include "beam_trace.h"
-
 #include <algorithm>
 #include <cmath>
 #include <exception>
 #include <limits>
 #include <stdexcept>
+#include <string>
 #include <thread>
+
+#include "beam_trace.h"
 
 namespace fusion {
 namespace {
@@ -53,6 +54,33 @@ class Probe {
 };
 
 }  // namespace
+
+bool RenderOptions::IsValid(std::string* why) const {
+  const auto fail = [why](const char* message) {
+    if (why != nullptr) *why = message;
+    return false;
+  };
+  if (!(resolution_m >= kMinResolutionM && resolution_m <= kMaxResolutionM)) {
+    return fail("resolution_m must lie in [0.001, 10] m");
+  }
+  if (!(free_ratio > 0.0 && std::isfinite(free_ratio))) {
+    return fail("free_ratio must be finite and > 0");
+  }
+  if (!(tail_mass > 0.0 && tail_mass < 1.0)) return fail("tail_mass must lie in (0, 1)");
+  if (max_subrays_per_axis < 1) return fail("max_subrays_per_axis must be >= 1");
+  if (!(max_range_m > 0.0 && std::isfinite(max_range_m))) {
+    return fail("max_range_m must be finite and > 0");
+  }
+  if (!(min_incidence_deg > 0.0 && min_incidence_deg < 90.0)) {
+    return fail("min_incidence_deg must lie in (0, 90)");
+  }
+  if (max_surface_subrays_per_axis < 1) return fail("max_surface_subrays_per_axis must be >= 1");
+  if (!(max_abs_log_odds > 0.0 && std::isfinite(max_abs_log_odds))) {
+    return fail("max_abs_log_odds must be finite and > 0");
+  }
+  if (threads > kMaxThreads) return fail("threads must lie in 0..256");
+  return true;
+}
 
 double MapHalfExtentM(double resolution_m) { return kTreeMaxVal * resolution_m; }
 
@@ -224,7 +252,8 @@ LocalGrid RenderBeamGrid(const BeamGrid& grid, const Eigen::Isometry3d& T_world_
             segments.clear();
             s.rays_traced += tracer.TraceBeam(b, /*first_mass_only=*/false, &segments).rays;
             s.segments += segments.size();
-            for (const auto& seg : segments) parts[t].AddEvidence(seg.key, seg.evidence, seg.weight);
+            for (const auto& seg : segments)
+              parts[t].AddEvidence(seg.key, seg.evidence, seg.weight);
           }
         }
       });

@@ -1,552 +1,95 @@
+// The projective render (docs/mapping.md): each beam's rays traced only through its first-hit
+// mass (beam_trace.cc), then the octree visited top down against a pyramid of the beams
+// (beam_pyramid.h, projective_descent.cc), free and unknown space decided block by block.
 #include "fusion/core/projective_render.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
-#include <cstring>
-#include <functional>
 #include <limits>
 #include <vector>
 
+#include "beam_pyramid.h"
 #include "beam_trace.h"
+#include "projective_descent.h"
 
 namespace fusion {
 namespace {
 
-constexpr int kTreeMaxVal = 32768;  // octomap tree_max_val for depth 16
-constexpr float kInf = std::numeric_limits<float>::infinity();
-// Rectangles of at most this many beams are read beam by beam, larger ones from the pyramid.
-constexpr int kExactBeams = 32;
-// Float rounding of the lattice's tangents, covered by widening every box by this.
-constexpr double kTanEps = 1e-5;
+using detail::Aggregate;
 
-double Square(double v) { return v * v; }
-#ifdef FUSION_COUNT
+// The voxels the rays crossed in the beams' first-hit mass, and the counters of that work.
+struct TracedMasses {
+  LocalGrid traced;
+  RenderStats stats;
+};
+
+// One touched beam: its rays traced through its first-hit mass into *part, and what the pyramid
+// keeps of it. clamp: RenderOptions::max_abs_log_odds.
+Aggregate TraceBeamMass(std::size_t beam, const BeamProfile& profile, float clamp,
+                        detail::BeamTracer* tracer, std::vector<detail::Segment>* segments,
+                        LocalGrid* part, RenderStats* stats) {
+  double free_end = std::min(profile.mass_begin_m, tracer->t_end());
+  segments->clear();
+  if (free_end < tracer->t_end()) {
+    const detail::BeamTrace trace = tracer->TraceBeam(beam, /*first_mass_only=*/true, segments);
+    stats->rays_traced += trace.rays;
+    free_end = std::max(tracer->t_start(), std::min(free_end, trace.mass_begin_m));
+  }
+  double far = free_end;
+  for (const auto& seg : *segments) {
+    far = std::max(far, seg.t_out_m);
+    part->AddEvidence(seg.key, seg.evidence, seg.weight);
+  }
+  stats->segments += segments->size();
+  Aggregate a;
+  a.beams = 1;
+  a.touched = 1;
+  a.min_free_end = a.max_free_end = static_cast<float>(free_end);
+  a.max_far = static_cast<float>(far);
+  a.max_free_value = std::isfinite(profile.free_log_odds)
+                         ? std::clamp(static_cast<float>(profile.free_log_odds), -clamp, clamp)
+                         : -clamp;
+  return a;
 }
-std::size_t g_counts[17][3][2];
-namespace {
-#endif
 
-// Lattice indices (i, j, k) of the 27 corners of a block's eight children, point n = i + 3 j +
-// 9 k, four at a time (the 28th repeats the origin).
-using F4c = float __attribute__((vector_size(16)));
-constexpr F4c kLatticeI[7] = {{0, 1, 2, 0}, {1, 2, 0, 1}, {2, 0, 1, 2}, {0, 1, 2, 0},
-                              {1, 2, 0, 1}, {2, 0, 1, 2}, {0, 1, 2, 0}};
-constexpr F4c kLatticeJ[7] = {{0, 0, 0, 1}, {1, 1, 2, 2}, {2, 0, 0, 0}, {1, 1, 1, 2},
-                              {2, 2, 0, 0}, {0, 1, 1, 1}, {2, 2, 2, 0}};
-// The lattice points (i + 3 j + 9 k) at the corners of each child (child c: i, j, k offsets from
-// its bits).
-constexpr int kChildCorners[8][8] = {
-    {0, 1, 3, 4, 9, 10, 12, 13},     {1, 2, 4, 5, 10, 11, 13, 14},
-    {3, 4, 6, 7, 12, 13, 15, 16},    {4, 5, 7, 8, 13, 14, 16, 17},
-    {9, 10, 12, 13, 18, 19, 21, 22}, {10, 11, 13, 14, 19, 20, 22, 23},
-    {12, 13, 15, 16, 21, 22, 24, 25}, {13, 14, 16, 17, 22, 23, 25, 26}};
-constexpr F4c kLatticeK[7] = {{0, 0, 0, 0}, {0, 0, 0, 0}, {0, 1, 1, 1}, {1, 1, 1, 1},
-                              {1, 1, 2, 2}, {2, 2, 2, 2}, {2, 2, 2, 0}};
-
-// What the pyramid keeps of a set of beams (one beam at level 0).
-struct Aggregate {
-  float min_free_end = kInf;   // nearest end of a free zone (m)
-  float max_free_end = -kInf;  // farthest end of a free zone
-  float max_far = -kInf;       // no voxel traced by (or in the oracle, crossed by) a ray of these
-                               // beams starts at or beyond this range
-  float max_free_value = -kInf;  // strongest (least negative) free-zone evidence
-  std::uint32_t touched = 0;
-  std::uint32_t beams = 0;
-
-  void Add(const Aggregate& o) {
-    min_free_end = std::min(min_free_end, o.min_free_end);
-    max_free_end = std::max(max_free_end, o.max_free_end);
-    max_far = std::max(max_far, o.max_far);
-    max_free_value = std::max(max_free_value, o.max_free_value);
-    touched += o.touched;
-    beams += o.beams;
-  }
-};
-
-// Min / max images of the beam grid, halved level by level: a rectangle of beams is answered
-// from at most 5 x 5 cells of the level where its larger side spans four cells.
-class BeamPyramid {
- public:
-  BeamPyramid(int cols, int rows, std::vector<Aggregate> beams) {
-    levels_.push_back({cols, rows, std::move(beams)});
-    while (levels_.back().cols > 1 || levels_.back().rows > 1) {
-      const Level& below = levels_.back();
-      Level up{(below.cols + 1) / 2, (below.rows + 1) / 2, {}};
-      up.cells.resize(static_cast<std::size_t>(up.cols) * up.rows);
-      for (int r = 0; r < below.rows; ++r) {
-        for (int c = 0; c < below.cols; ++c) {
-          up.cells[static_cast<std::size_t>(r / 2) * up.cols + c / 2].Add(
-              below.cells[static_cast<std::size_t>(r) * below.cols + c]);
-        }
-      }
-      levels_.push_back(std::move(up));
-    }
-  }
-
-  [[nodiscard]] const Aggregate& Beam(int col, int row) const {
-    return levels_[0].cells[static_cast<std::size_t>(row) * levels_[0].cols + col];
-  }
-  // Beams of columns [c0, c1] and rows [r0, r1] (a superset, for large rectangles).
-  [[nodiscard]] Aggregate Query(int c0, int c1, int r0, int r1) const {
-    Aggregate out;
-    const int w = c1 - c0 + 1;
-    const int h = r1 - r0 + 1;
-    std::size_t l = 0;
-    if (w * h > kExactBeams) {
-      // The coarsest level whose cells still give a bound within 4 x 4 cells of the rectangle.
-      while ((4 << l) < std::max(w, h)) ++l;
-      l = std::min(l, levels_.size() - 1);
-    }
-    const Level& level = levels_[l];
-    for (int r = r0 >> l; r <= (r1 >> l); ++r) {
-      for (int c = c0 >> l; c <= (c1 >> l); ++c) {
-        out.Add(level.cells[static_cast<std::size_t>(r) * level.cols + c]);
-      }
-    }
-    return out;
-  }
-
- private:
-  struct Level {
-    int cols;
-    int rows;
-    std::vector<Aggregate> cells;
-  };
-  std::vector<Level> levels_;
-};
-
-// The top-down visit of the octree. A block whose beams (the pyramid's superset of them) are
-// all touched and free through it, but which is not wholly inside the field of view or beyond
-// r_min, passes that verdict down: its parts are then decided by geometry alone.
-class Descent {
- public:
-  Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-          const RenderOptions& options, const BeamPyramid& pyramid, const LocalGrid& traced,
-          double t_start, float global_far, const SaturatedFree* skip, RenderedGrid* out,
-          RenderStats* stats)
-      : tess_(grid.tessellation()),
-        skip_(skip != nullptr && skip->history != nullptr && skip->others.size() <= kMaxOthers
-                  ? skip
-                  : nullptr),
-        options_(options),
-        pyramid_(pyramid),
-        traced_(traced),
-        R_(T_world_sensor.linear()),
-        Rt_(T_world_sensor.linear().transpose()),
-        origin_(T_world_sensor.translation()),
-        t_start_(t_start),
-        global_far_(global_far),
-        out_(out),
-        stats_(stats) {
-    // Known space ends where the outermost rays of the ray-traced render run: the centre lines of
-    // the edge beams, and beyond r_split (where beams outgrow a voxel) their outermost sub-rays,
-    // 1 / (2 k) of a beam from the edge of the field of view.
-    fov_ = Bounds(0.0);
-    const double width = std::max(tess_.beam_width_h_rad(), tess_.beam_width_v_rad());
-    r_split2_ = Square(options.resolution_m / width);
-    const int k_far = std::clamp(
-        static_cast<int>(std::ceil(width * grid.cells_per_beam() * grid.options().cell_size_m /
-                                   options.resolution_m)),
-        1, std::max(1, options.max_subrays_per_axis));
-    known_near_ = Bounds(0.5);
-    known_far_ = Bounds(0.5 / k_far);
-    for (int c = 0; c < tess_.cols(); ++c) {
-      col_centres_.push_back(std::tan(-0.5 * grid.spec().fov_h_rad + (c + 0.5) * tess_.beam_width_h_rad()));
-    }
-    for (int r = 0; r < tess_.rows(); ++r) {
-      row_centres_.push_back(std::tan(0.5 * grid.spec().fov_v_rad - (r + 0.5) * tess_.beam_width_v_rad()));
-    }
-    // Every direction of the field of view has z >= cone_ * |p| (its corners lean the most).
-    const double ta = std::max(std::abs(tess_.TanAzimuthMin()), std::abs(tess_.TanAzimuthMax()));
-    const double te = std::max(std::abs(tess_.TanElevationMin()), std::abs(tess_.TanElevationMax()));
-    cone2_ = 1.0 / (1.0 + ta * ta + te * te * (1.0 + ta * ta));
-    t_start2_ = t_start_ * t_start_;
-    global_far2_ = Square(global_far_);
-  }
-
-  // Visits the children of a block that is neither wholly free nor wholly unknown.
-  // `beams` is what the pyramid said of this block (a superset of every child's beams):
-  // voxels are classified from it, only the voxels it leaves undecided look closer.
-  // The map's history over this block, and the other live contributions' nodes in it (see
-  // SaturatedFree).
-  struct MapHere {
-    const octomap::OcTreeNode* history = nullptr;
-    std::array<const MapNode*, 8> lo{}, hi{};
-    bool others_cover = false;  // an other contribution's node covers the whole block
-  };
-  MapHere RootMap() const {
-    MapHere m;
-    if (skip_ == nullptr) return m;
-    m.history = skip_->history->getRoot();
-    for (std::size_t i = 0; i < skip_->others.size(); ++i) {
-      const auto& nodes = skip_->others[i]->nodes();
-      m.lo[i] = nodes.data();
-      m.hi[i] = nodes.data() + nodes.size();
-      if (!nodes.empty() && nodes.front().depth == 0) m.others_cover = true;
-    }
-    return m;
-  }
-
-  void VisitChildren(unsigned depth, const std::array<int, 3>& key_min, const Aggregate& beams,
-                     bool free_through, const MapHere& map) {
-    const unsigned child_depth = depth + 1;
-    const int half = 1 << (kTreeDepth - child_depth);
-    const double res = options_.resolution_m;
-    const double child_size = res * half;
-    Eigen::Vector3d lo;
-    for (int a = 0; a < 3; ++a) lo[a] = (key_min[a] - kTreeMaxVal) * res;
-    // Corners of the eight children: a 3 x 3 x 3 lattice, its angles in the sensor frame, in
-    // floats so that the loop below runs on vectors (the margins cover the rounding).
-    const Eigen::Vector3d base = Rt_ * (lo - origin_);
-    const Eigen::Matrix3d step = Rt_ * child_size;
-    // Azimuth tangent x / z and the elevation tangent's signed square y |y| / (x^2 + z^2) (no
-    // square root), four lattice points at a time.
-    // The lattice is built on vectors too (scalar stores read back as vectors stall).
-    using F4 = float __attribute__((vector_size(16)));
-    alignas(16) float pz[28], az[28], el[28];
-    const F4 tiny = {1e-6f, 1e-6f, 1e-6f, 1e-6f};
-    const F4 one = {1.0f, 1.0f, 1.0f, 1.0f};
-    const auto splat = [](double v) {
-      const auto f = static_cast<float>(v);
-      return F4{f, f, f, f};
-    };
-    for (int n = 0; n < 28; n += 4) {
-      const F4& i = kLatticeI[n / 4];
-      const F4& j = kLatticeJ[n / 4];
-      const F4& k = kLatticeK[n / 4];
-      const F4 x = splat(base.x()) + i * splat(step(0, 0)) + j * splat(step(0, 1)) +
-                   k * splat(step(0, 2));
-      const F4 y = splat(base.y()) + i * splat(step(1, 0)) + j * splat(step(1, 1)) +
-                   k * splat(step(1, 2));
-      const F4 z = splat(base.z()) + i * splat(step(2, 0)) + j * splat(step(2, 1)) +
-                   k * splat(step(2, 2));
-      const F4 zs = z > tiny ? z : one;
-      const F4 a = x / zs;
-      const F4 ny = -y;
-      const F4 e = ny * (ny < 0 ? -ny : ny) / (x * x + zs * zs);
-      std::memcpy(pz + n, &z, sizeof z);
-      std::memcpy(az + n, &a, sizeof a);
-      std::memcpy(el + n, &e, sizeof e);
-    }
-    // Per point {azimuth tangent, elevation's signed square, z, -z}: a child's ranges are then
-    // the lane-wise minimum and maximum of its eight corners.
-    F4 point[27];
-    for (int n = 0; n < 27; ++n) point[n] = F4{az[n], el[n], pz[n], -pz[n]};
-    // Per axis, the offsets of the two child slabs from the sensor: their nearest and farthest
-    // squared distances.
-    double near2[3][2], far2[3][2];
-    for (int a = 0; a < 3; ++a) {
-      for (int c = 0; c < 2; ++c) {
-        const double l = lo[a] + c * child_size - origin_[a];
-        const double h = l + child_size;
-        const double n = l > 0.0 ? l : (h < 0.0 ? -h : 0.0);
-        const double f = std::max(std::abs(l), std::abs(h));
-        near2[a][c] = n * n;
-        far2[a][c] = f * f;
-      }
-    }
-    std::array<const MapNode*, 8> next = map.lo;
-    for (int child = 0; child < 8; ++child) {
-      const int cx = child & 1, cy = (child >> 1) & 1, cz = (child >> 2) & 1;
-      const MapHere child_map = ChildMap(map, depth, key_min, child, &next);
-      Box box;
-      box.size = child_size;
-      box.lo = lo + Eigen::Vector3d(cx, cy, cz) * child_size;
-      box.r_lo2 = near2[0][cx] + near2[1][cy] + near2[2][cz];
-      box.r_hi2 = far2[0][cx] + far2[1][cy] + far2[2][cz];
-      if (box.r_hi2 <= t_start2_ || box.r_lo2 >= global_far2_) continue;
-      const int* corners = kChildCorners[child];
-      F4 lo4 = point[corners[0]], hi4 = lo4;
-      for (int c = 1; c < 8; ++c) {
-        const F4 q = point[corners[c]];
-        lo4 = lo4 < q ? lo4 : q;
-        hi4 = hi4 > q ? hi4 : q;
-      }
-      const float az_lo = lo4[0], el_lo = lo4[1], az_hi = hi4[0], el_hi = hi4[1];
-      box.z_max = hi4[2];
-      box.ahead = -hi4[3] > 1e-6f;  // the smallest z
-      box.az_lo = az_lo - kTanEps;
-      box.az_hi = az_hi + kTanEps;
-      box.el_lo = std::copysign(std::sqrt(std::abs(el_lo)), el_lo) - kTanEps;
-      box.el_hi = std::copysign(std::sqrt(std::abs(el_hi)), el_hi) + kTanEps;
-      const std::array<int, 3> k = {key_min[0] + cx * half, key_min[1] + cy * half,
-                                    key_min[2] + cz * half};
-      const Verdict v = Classify(child_depth, box, beams, free_through);
-      if (Saturated(child_map) &&
-          (v.kind == Kind::kFree || (v.kind == Kind::kMixed && v.free_through))) {
-        ++stats_->skipped_saturated;
-        continue;  // free where the map is held free at the clamp already
-      }
-#ifdef FUSION_COUNT
-      ++g_counts[child_depth][int(v.kind)][free_through ? 1 : 0];
-#endif
-      if (v.kind == Kind::kUnknown) continue;
-      if (v.kind == Kind::kFree) {
-        Emit(child_depth, k, v.free_value);
-      } else if (child_depth == kTreeDepth) {
-        VisitVoxel(k, box, v, Saturated(child_map));
-      } else {
-        VisitChildren(child_depth, k, v.beams, v.free_through, child_map);
-      }
-    }
-  }
-
- private:
-  enum class Kind { kUnknown, kFree, kMixed };
-  struct Box {
-    double size = 0.0;
-    Eigen::Vector3d lo = Eigen::Vector3d::Zero();  // world frame, the corner nearest -infinity
-    double r_lo2 = 0.0;  // squared distance of the nearest point to the sensor
-    double r_hi2 = 0.0;  // squared distance of the farthest corner
-    bool ahead = false;  // every corner in front of the sensor
-    double z_max = 0.0;  // along the optical axis
-    double az_lo = 0.0, az_hi = 0.0, el_lo = 0.0, el_hi = 0.0;  // tangents over the corners
-  };
-  static constexpr std::size_t kMaxOthers = 8;
-
-  MapHere ChildMap(const MapHere& map, unsigned depth, const std::array<int, 3>& key_min,
-                   int child, std::array<const MapNode*, 8>* next) const {
-    MapHere c;
-    if (skip_ == nullptr) return c;
-    const octomap::OcTree& tree = *skip_->history;
-    if (map.history != nullptr) {
-      if (!tree.nodeHasChildren(map.history)) {
-        c.history = map.history;  // a coarser leaf holds the child
-      } else if (tree.nodeChildExists(map.history, static_cast<unsigned>(child))) {
-        c.history = tree.getNodeChild(map.history, static_cast<unsigned>(child));
-      }
-    }
-    c.others_cover = map.others_cover;
-    if (c.others_cover) return c;
-    const octomap::OcTreeKey k(static_cast<octomap::key_type>(key_min[0]),
-                               static_cast<octomap::key_type>(key_min[1]),
-                               static_cast<octomap::key_type>(key_min[2]));
-    const std::uint64_t end = MortonOf(k) + (child + 1) * MortonSpan(depth + 1);
-    for (std::size_t i = 0; i < skip_->others.size(); ++i) {
-      const MapNode* lo = (*next)[i];
-      const MapNode* hi =
-          map.hi[i] - lo <= 16
-              ? std::find_if(lo, map.hi[i], [end](const MapNode& n) { return n.code >= end; })
-              : std::lower_bound(lo, map.hi[i], end,
-                                 [](const MapNode& n, std::uint64_t e) { return n.code < e; });
-      (*next)[i] = hi;
-      c.lo[i] = lo;
-      c.hi[i] = hi;
-      if (lo != hi && lo->depth <= depth + 1) c.others_cover = true;
-    }
-    return c;
-  }
-
-  // The history holds the whole block at or below the free clamp, and no other live
-  // contribution says anything there.
-  bool Saturated(const MapHere& m) const {
-    if (skip_ == nullptr || m.history == nullptr || m.others_cover) return false;
-    if (skip_->history->nodeHasChildren(m.history) ||
-        m.history->getLogOdds() > skip_->clamp_min_log_odds) {
-      return false;
-    }
-    for (std::size_t i = 0; i < skip_->others.size(); ++i) {
-      if (m.lo[i] != m.hi[i]) return false;
-    }
-    return true;
-  }
-
-  // Tangent bounds of the field of view, each side moved in by `inset` beam widths.
-  struct TanBounds {
-    double az_min, az_max, el_min, el_max;
-    [[nodiscard]] bool Overlaps(const Box& b) const {
-      return b.az_hi >= az_min && b.az_lo <= az_max && b.el_hi >= el_min && b.el_lo <= el_max;
-    }
-    [[nodiscard]] bool Holds(const Box& b) const {
-      return b.az_lo >= az_min && b.az_hi <= az_max && b.el_lo >= el_min && b.el_hi <= el_max;
-    }
-    [[nodiscard]] bool Holds(double az, double el) const {
-      return az >= az_min && az <= az_max && el >= el_min && el <= el_max;
-    }
-  };
-  TanBounds Bounds(double inset) const {
-    const double w = inset * tess_.beam_width_h_rad();
-    const double h = inset * tess_.beam_width_v_rad();
-    return {std::tan(std::atan(tess_.TanAzimuthMin()) + w),
-            std::tan(std::atan(tess_.TanAzimuthMax()) - w),
-            std::tan(std::atan(tess_.TanElevationMin()) + h),
-            std::tan(std::atan(tess_.TanElevationMax()) - h)};
-  }
-  // The known region that applies at the near / far end of a box.
-  const TanBounds& KnownAt(double r2) const { return r2 > r_split2_ ? known_far_ : known_near_; }
-
-  struct Verdict {
-    Kind kind = Kind::kUnknown;
-    float free_value = 0.0f;
-    bool free_through = false;  // mixed only by geometry: every beam is free through the box
-    Aggregate beams;
-  };
-
-  Verdict Classify(unsigned depth, Box& box, const Aggregate& parent, bool free_through) const {
-    Verdict v;
-    const bool voxel = depth == kTreeDepth;
-    // Outside the cone that holds the field of view.
-    if (box.z_max < 0.0 || box.z_max * box.z_max < cone2_ * box.r_lo2) return v;
-    // Near the sensor (or behind its image plane) the corners do not bound the angles.
-    if (box.r_lo2 < 4.0 * box.size * box.size || !box.ahead) {
-      if (!voxel) v.kind = Kind::kMixed;
-      return v;
-    }
-    // Exact for azimuth (x / z is linear fractional: its extremes are at corners); the
-    // elevation tangent may peak inside a face, by at most size^2 / (2 r_lo^2) radians.
-    const double margin = box.size * box.size / (2.0 * box.r_lo2);
-    box.el_lo -= margin * (1.0 + box.el_lo * box.el_lo);
-    box.el_hi += margin * (1.0 + box.el_hi * box.el_hi);
-    if (!fov_.Overlaps(box)) return v;
-    const bool in_known = KnownAt(box.r_lo2).Holds(box) && KnownAt(box.r_hi2).Holds(box);
-    if (free_through || voxel) {
-      v.beams = parent;
-      if (v.beams.touched == 0 || box.r_lo2 >= Square(v.beams.max_far)) return v;
-    } else {
-      v.beams = pyramid_.Query(tess_.ColumnOfTangent(box.az_lo), tess_.ColumnOfTangent(box.az_hi),
-                               tess_.RowOfTangent(box.el_hi), tess_.RowOfTangent(box.el_lo));
-      if (v.beams.touched == 0 || box.r_lo2 >= Square(v.beams.max_far)) return v;
-    }
-    const bool all_free =
-        v.beams.touched == v.beams.beams && box.r_hi2 <= Square(v.beams.min_free_end);
-    if (all_free && in_known && box.r_lo2 >= t_start2_) {
-      v.kind = Kind::kFree;
-      v.free_value = v.beams.max_free_value;
-      return v;
-    }
-    v.kind = Kind::kMixed;
-    v.free_through = all_free;
-    return v;
-  }
-
-  // A voxel the pyramid could not decide: its traced value if a ray crossed it in a beam's
-  // mass, else free if a beam whose rays reach it is free into it, else unknown. A beam's rays
-  // reach the voxel if its centre line does (its direction lies in the voxel's angular box);
-  // beyond r_split, where beams are wider than voxels and traced with sub-rays, if the voxel
-  // overlaps its sector.
-  void VisitVoxel(const std::array<int, 3>& key_min, const Box& box, const Verdict& v,
-                  bool saturated) {
-    const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
-                                 static_cast<octomap::key_type>(key_min[1]),
-                                 static_cast<octomap::key_type>(key_min[2]));
-    // A voxel free in every beam it overlaps holds no traced segment.
-    if (const auto traced = v.free_through ? std::nullopt : traced_.LogOddsOf(key)) {
-      if (saturated && *traced <= 0.0) {
-        ++stats_->skipped_saturated;
-      } else {
-        Emit(kTreeDepth, key_min, static_cast<float>(*traced));
-      }
-      return;
-    }
-    if (saturated) {  // free at most, where the map holds free at the clamp already
-      ++stats_->skipped_saturated;
-      return;
-    }
-    if (!KnownAt(box.r_hi2).Overlaps(box) || box.r_hi2 <= t_start2_) return;
-    Aggregate reach;
-    if (box.r_hi2 > r_split2_) {
-      reach = pyramid_.Query(tess_.ColumnOfTangent(box.az_lo), tess_.ColumnOfTangent(box.az_hi),
-                             tess_.RowOfTangent(box.el_hi), tess_.RowOfTangent(box.el_lo));
-    } else {
-      // The beams whose centre direction lies in the box: the beams holding its corners, less an
-      // edge beam whose centre lies outside.
-      int c0 = tess_.ColumnOfTangent(box.az_lo), c1 = tess_.ColumnOfTangent(box.az_hi);
-      int r0 = tess_.RowOfTangent(box.el_hi), r1 = tess_.RowOfTangent(box.el_lo);
-      if (col_centres_[c0] < box.az_lo) ++c0;
-      if (col_centres_[c1] > box.az_hi) --c1;
-      if (row_centres_[r0] > box.el_hi) ++r0;  // row centres fall with the row index
-      if (row_centres_[r1] < box.el_lo) --r1;
-      reach = CentreLinesThrough(box, c0, c1 + 1, r0, r1 + 1);
-    }
-    if (reach.touched != 0 && box.r_lo2 < Square(reach.max_free_end)) {
-      Emit(kTreeDepth, key_min, reach.max_free_value);
-    }
-  }
-
-  // The touched beams among columns [c0, c1) and rows [r0, r1) if the centre line of one of
-  // them that is free into the box crosses it (a slab test: the angular box also holds
-  // directions that miss a cube at its corners); else nothing.
-  Aggregate CentreLinesThrough(const Box& box, int c0, int c1, int r0, int r1) {
-    Aggregate out;
-    if (c1 <= c0 || r1 <= r0) return out;
-    const Aggregate all = pyramid_.Query(c0, c1 - 1, r0, r1 - 1);
-    if (all.touched == 0 || box.r_lo2 >= Square(all.max_free_end)) return out;
-    const Eigen::Vector3d lo = box.lo - origin_;
-    const Eigen::Vector3d hi = lo + Eigen::Vector3d::Constant(box.size);
-    const auto crosses = [&](int c, int r) {
-      const Aggregate& beam = pyramid_.Beam(c, r);
-      if (beam.touched == 0 || box.r_lo2 >= Square(beam.max_free_end)) return false;
-      const Eigen::Vector3f& d = WorldDirection(static_cast<std::size_t>(r) * tess_.cols() + c);
-      double t_in = 0.0, t_out = std::numeric_limits<double>::infinity();
-      for (int a = 0; a < 3 && t_in <= t_out; ++a) {
-        if (d[a] == 0.0f) {
-          if (lo[a] > 0.0 || hi[a] < 0.0) return false;
+// Every beam's rays through its first-hit mass, rows dealt to `workers` threads, each into its
+// own grid (merged at the end); (*beams)[b] becomes beam b's Aggregate.
+TracedMasses TraceMasses(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                         const RenderOptions& options, const std::vector<BeamProfile>& profiles,
+                         std::size_t workers, std::vector<Aggregate>* beams) {
+  const auto rows = static_cast<std::size_t>(grid.tessellation().rows());
+  const auto cols = static_cast<std::size_t>(grid.tessellation().cols());
+  std::vector<LocalGrid> parts(workers, LocalGrid(options.resolution_m, options.combine));
+  std::vector<RenderStats> part_stats(workers);
+  const float clamp = static_cast<float>(options.max_abs_log_odds);
+  detail::ForEachRowBlock(rows, workers, [&](std::size_t t, const std::vector<std::size_t>& mine) {
+    detail::BeamTracer tracer(grid, T_world_sensor, options, profiles);
+    std::vector<detail::Segment> segments;
+    RenderStats& s = part_stats[t];
+    parts[t].Reserve(mine.size() * cols);
+    for (const std::size_t row : mine) {
+      for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
+        if (!grid.Touched(b)) {
+          (*beams)[b].beams = 1;
+          ++s.beams_untouched;
           continue;
         }
-        const double ta = lo[a] / d[a], tb = hi[a] / d[a];
-        t_in = std::max(t_in, std::min(ta, tb));
-        t_out = std::min(t_out, std::max(ta, tb));
-      }
-      return t_in <= t_out;
-    };
-    // The middle beam's line is the likeliest to cross.
-    if (crosses((c0 + c1 - 1) / 2, (r0 + r1 - 1) / 2)) return all;
-    for (int r = r0; r < r1; ++r) {
-      for (int c = c0; c < c1; ++c) {
-        if (crosses(c, r)) return all;
+        ++s.beams_rendered;
+        (*beams)[b] = TraceBeamMass(b, profiles[b], clamp, &tracer, &segments, &parts[t], &s);
       }
     }
-    return out;
+  });
+  TracedMasses out{std::move(parts[0]), part_stats[0]};
+  for (std::size_t t = 1; t < workers; ++t) {
+    out.traced.Merge(parts[t]);
+    out.stats.beams_rendered += part_stats[t].beams_rendered;
+    out.stats.beams_untouched += part_stats[t].beams_untouched;
+    out.stats.rays_traced += part_stats[t].rays_traced;
+    out.stats.segments += part_stats[t].segments;
   }
-
-  // A beam's centre line in the world frame, computed once per render when first needed.
-  const Eigen::Vector3f& WorldDirection(std::size_t beam) {
-    if (directions_.empty()) {
-      directions_.resize(tess_.beam_count());
-      have_direction_.assign(tess_.beam_count(), 0);
-    }
-    if (have_direction_[beam] == 0) {
-      directions_[beam] = (R_ * tess_.Direction(beam)).cast<float>();
-      have_direction_[beam] = 1;
-    }
-    return directions_[beam];
-  }
-
-  void Emit(unsigned depth, const std::array<int, 3>& key_min, float value) {
-    const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
-                                 static_cast<octomap::key_type>(key_min[1]),
-                                 static_cast<octomap::key_type>(key_min[2]));
-    out_->Append({MortonOf(key), value, static_cast<std::uint8_t>(depth)});
-    if (depth == kTreeDepth) {
-      ++stats_->fine_voxels;
-    } else {
-      ++stats_->coarse_nodes;
-    }
-  }
-
-  const BeamTessellation& tess_;
-  const SaturatedFree* skip_;
-  const RenderOptions& options_;
-  const BeamPyramid& pyramid_;
-  const LocalGrid& traced_;
-  Eigen::Matrix3d R_;
-  Eigen::Matrix3d Rt_;
-  Eigen::Vector3d origin_;
-  double t_start_;
-  double global_far_;
-  RenderedGrid* out_;
-  RenderStats* stats_;
-  double cone2_ = 0.0;  // squared
-  TanBounds fov_{}, known_near_{}, known_far_{};
-  std::vector<double> col_centres_;  // tangent of each column's centre azimuth, ascending
-  std::vector<double> row_centres_;  // tangent of each row's centre elevation, descending
-  std::vector<Eigen::Vector3f> directions_;
-  std::vector<std::uint8_t> have_direction_;
-  double r_split2_ = 0.0;
-  double t_start2_ = 0.0;
-  double global_far2_ = 0.0;
-};
+  out.stats.voxels = out.traced.size();
+  return out;
+}
 
 }  // namespace
 
@@ -557,74 +100,22 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
   if (!tess.HasTangentEdges()) {
     return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
   }
-  const auto rows = static_cast<std::size_t>(tess.rows());
-  const auto cols = static_cast<std::size_t>(tess.cols());
-  const std::size_t workers = detail::RowWorkers(rows, options.threads);
-  std::vector<LocalGrid> parts(workers, LocalGrid(options.resolution_m, options.combine));
-  std::vector<RenderStats> part_stats(workers);
-  std::vector<Aggregate> beams(grid.beam_count());
+  const std::size_t workers =
+      detail::RowWorkers(static_cast<std::size_t>(tess.rows()), options.threads);
   const double t_start = detail::BeamTracer::StartOf(grid);
-  const float clamp = static_cast<float>(options.max_abs_log_odds);
   // Each beam's free zone and mass (first, for every beam: a beam's rays follow its
   // neighbours' surfaces), then its rays traced through the mass.
   const std::vector<BeamProfile> profiles = detail::ProfileBeams(grid, options, t_start, workers);
-  detail::ForEachRowBlock(rows, workers, [&](std::size_t t, const std::vector<std::size_t>& mine) {
-    detail::BeamTracer tracer(grid, T_world_sensor, options, profiles);
-    std::vector<detail::Segment> segments;
-    RenderStats& s = part_stats[t];
-    parts[t].Reserve(mine.size() * cols);
-    for (const std::size_t row : mine) {
-      for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
-        Aggregate& a = beams[b];
-        a.beams = 1;
-        if (!grid.Touched(b)) {
-          ++s.beams_untouched;
-          continue;
-        }
-        ++s.beams_rendered;
-        const BeamProfile& p = profiles[b];
-        double free_end = std::min(p.mass_begin_m, tracer.t_end());
-        segments.clear();
-        if (free_end < tracer.t_end()) {
-          const detail::BeamTrace trace = tracer.TraceBeam(b, /*first_mass_only=*/true, &segments);
-          s.rays_traced += trace.rays;
-          free_end = std::max(tracer.t_start(), std::min(free_end, trace.mass_begin_m));
-        }
-        double far = free_end;
-        for (const auto& seg : segments) {
-          far = std::max(far, seg.t_out_m);
-          parts[t].AddEvidence(seg.key, seg.evidence, seg.weight);
-        }
-        s.segments += segments.size();
-        a.touched = 1;
-        a.min_free_end = a.max_free_end = static_cast<float>(free_end);
-        a.max_far = static_cast<float>(far);
-        a.max_free_value = std::isfinite(p.free_log_odds)
-                               ? std::clamp(static_cast<float>(p.free_log_odds), -clamp, clamp)
-                               : -clamp;
-      }
-    }
-  });
-  LocalGrid traced = std::move(parts[0]);
-  RenderStats s = part_stats[0];
-  for (std::size_t t = 1; t < workers; ++t) {
-    traced.Merge(parts[t]);
-    s.beams_rendered += part_stats[t].beams_rendered;
-    s.beams_untouched += part_stats[t].beams_untouched;
-    s.rays_traced += part_stats[t].rays_traced;
-    s.segments += part_stats[t].segments;
-  }
-  s.voxels = traced.size();
-  float global_far = -kInf;
+  std::vector<Aggregate> beams(grid.beam_count());
+  TracedMasses masses = TraceMasses(grid, T_world_sensor, options, profiles, workers, &beams);
+  RenderStats& s = masses.stats;
+  float global_far = -std::numeric_limits<float>::infinity();
   for (const Aggregate& a : beams) global_far = std::max(global_far, a.max_far);
-  const BeamPyramid pyramid(tess.cols(), tess.rows(), std::move(beams));
+  const detail::BeamPyramid pyramid(tess.cols(), tess.rows(), std::move(beams));
   RenderedGrid out(options.resolution_m);
   if (s.beams_rendered > 0) {
-    Descent descent(grid, T_world_sensor, options, pyramid, traced, t_start, global_far, skip,
-                    &out, &s);
-    Aggregate everything;
-    everything.touched = everything.beams = 1;
-    descent.VisitChildren(0, {0, 0, 0}, everything, /*free_through=*/false, descent.RootMap());
+    detail::DescendOctree(grid, T_world_sensor, options, pyramid, masses.traced, t_start,
+                          global_far, skip, &out, &s);
   }
   if (stats != nullptr) *stats = s;
   return out;

@@ -1,6 +1,8 @@
 #include "fusion/core/world_map.h"
 
 #include <algorithm>
+#include <cmath>
+#include <string>
 #include <utility>
 
 #include "fusion/core/octree_merge.h"
@@ -36,6 +38,46 @@ RenderOptions MapRenderOptions(const WorldMapOptions& options) {
   RenderOptions render = options.render;
   render.resolution_m = options.resolution_m;
   return render;
+}
+
+bool WorldMapOptions::IsValid(std::string* why) const {
+  std::string local;
+  std::string& out = why != nullptr ? *why : local;
+  const auto fail = [&out](const char* message) {
+    out = message;
+    return false;
+  };
+  if (!(resolution_m >= RenderOptions::kMinResolutionM &&
+        resolution_m <= RenderOptions::kMaxResolutionM)) {
+    return fail("resolution_m must lie in [0.001, 10] m");
+  }
+  if (!(pose_tolerance_m >= 0.0 && std::isfinite(pose_tolerance_m))) {
+    return fail("pose_tolerance_m must be finite and >= 0");
+  }
+  if (!(pose_tolerance_rad >= 0.0 && pose_tolerance_rad <= 3.14159265358979323846)) {
+    return fail("pose_tolerance_rad must lie in [0, pi]");
+  }
+  if (!(clamping_min_probability > 0.0 && clamping_min_probability < clamping_max_probability &&
+        clamping_max_probability < 1.0)) {
+    return fail(
+        "clamping_min_probability and clamping_max_probability must satisfy 0 < min < "
+        "max < 1");
+  }
+  if (!(occupancy_threshold > 0.0 && occupancy_threshold < 1.0)) {
+    return fail("occupancy_threshold must lie in (0, 1)");
+  }
+  if (!(beam_prior_length_m > 0.0 && std::isfinite(beam_prior_length_m))) {
+    return fail("beam_prior_length_m must be finite and > 0");
+  }
+  if (!SensorGridOptions(*this).IsValid(&out)) {
+    out = "beam_grid." + out;
+    return false;
+  }
+  if (!MapRenderOptions(*this).IsValid(&out)) {
+    out = "render." + out;
+    return false;
+  }
+  return true;
 }
 
 struct WorldMap::SensorState {
@@ -139,8 +181,7 @@ MapStatus WorldMap::CommitLive(const std::string& sensor_id) {
   SensorState* s = Find(sensor_id);
   if (s == nullptr) return MapStatus::kUnknownSensor;
   if (s->live.empty()) return MapStatus::kOk;
-  FuseRegions(*committed_, policy_, {{committed_.get(), nullptr}, {nullptr, &s->live}},
-              {&s->live});
+  FuseRegions(*committed_, policy_, {{committed_.get(), nullptr}, {nullptr, &s->live}}, {&s->live});
   RenderedGrid old = std::move(s->live);
   s->live = RenderedGrid(options_.resolution_m);
   s->counters.live_nodes = 0;
@@ -213,10 +254,9 @@ MapStatus WorldMap::Integrate(const std::string& sensor_id, const Eigen::Isometr
   SensorState* s = Find(sensor_id);
   if (s == nullptr) return MapStatus::kUnknownSensor;
   if (!s->periods) {
-    s->periods = std::make_unique<SensorPeriods>(s->spec, SensorGridOptions(options_),
-                                                 options_.pose_tolerance_m,
-                                                 options_.pose_tolerance_rad,
-                                                 options_.resolution_m);
+    s->periods = std::make_unique<SensorPeriods>(
+        s->spec, SensorGridOptions(options_), options_.pose_tolerance_m,
+        options_.pose_tolerance_rad, options_.resolution_m);
   }
   PeriodIntegration result;
   std::unique_ptr<Period> sealed;
@@ -259,9 +299,9 @@ MapStatus WorldMap::Render(const std::string& sensor_id, FuseStats* stats) {
   if (s->periods && s->periods->open().frames > 0) {
     const Period& open = s->periods->open();
     const SaturatedFree skip = Saturation(sensor_id);
-    (void)ReplaceLive(sensor_id, fusion::Render(*open.grid, open.T_world_sensor, render_,
-                                                &result.render, &skip),
-                      &result);
+    (void)ReplaceLive(
+        sensor_id, fusion::Render(*open.grid, open.T_world_sensor, render_, &result.render, &skip),
+        &result);
     s->rendered_frames = open.frames;
     (void)Publish();
   }

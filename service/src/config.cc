@@ -9,6 +9,8 @@
 #include <set>
 #include <sstream>
 
+#include "fusion/core/fusion_rules.h"
+#include "fusion/core/world_map.h"
 #include "fusion/service/conversions.h"
 #include "fusion/service/security.h"
 
@@ -65,11 +67,9 @@ bool ValidateMap(const fusion::v1::MapConfig& map, std::string* error) {
     return Fail(error, "map.render_interval_ms",
                 std::to_string(map.render_interval_ms()) + " is outside 1..600000");
   }
-  const auto in_unit = [](double p) { return p > 0.0 && p < 1.0; };
-  if (!in_unit(map.occupied_threshold())) {
-    return Fail(error, "map.occupied_threshold", "must lie in (0, 1)");
-  }
-  if (!in_unit(map.free_threshold()) || map.free_threshold() > map.occupied_threshold()) {
+  // occupied_threshold is core's WorldMapOptions::occupancy_threshold, checked above; the free
+  // threshold is the service's alone (StateThresholds).
+  if (!(map.free_threshold() > 0.0) || map.free_threshold() > map.occupied_threshold()) {
     return Fail(error, "map.free_threshold", "must lie in (0, occupied_threshold]");
   }
   return true;
@@ -148,6 +148,20 @@ bool ValidateLimits(const fusion::v1::QueryLimits& limits, std::string* error) {
   return true;
 }
 
+// fusiond's deployed map defaults, where they differ from core's on purpose. The one place for
+// them: every other map default in DefaultConfig() is core's own constant.
+// - Voxels of 5 cm (core's WorldMapOptions: 2 cm): a service maps rooms to buildings while its
+//   sensors move, and a 5 cm render of an SR-3000 frame costs a fraction of a 2 cm one
+//   (BENCHMARKS.md); its keys reach +-1638 m (2 cm: +-655 m).
+// - Beam cells of 2 mm (core's BeamGridOptions: 1 mm): half the cells, memory and integration
+//   work per beam, still 25 cells to a voxel.
+// - A dead band around core's single threshold of 0.5: voxels the renderer wrote with next to
+//   no evidence stay unknown.
+constexpr double kServiceResolutionM = 0.05;
+constexpr double kServiceBeamCellSizeM = 0.002;
+constexpr double kServiceOccupiedThreshold = 0.55;
+constexpr double kServiceFreeThreshold = 0.45;
+
 }  // namespace
 
 fusion::v1::ServiceConfig DefaultConfig() {
@@ -158,15 +172,14 @@ fusion::v1::ServiceConfig DefaultConfig() {
   config.set_log_level("info");
   config.set_log_format("text");
   auto* map = config.mutable_map();
-  map->set_resolution_m(0.05);
-  map->set_fusion_rule("independent_opinion_pool");
-  map->set_pose_tolerance_m(0.01);
-  map->set_pose_tolerance_deg(1.0);
+  map->set_resolution_m(kServiceResolutionM);
+  map->set_fusion_rule(FusionRuleName(WorldMapOptions::kDefaultRule));
+  map->set_pose_tolerance_m(WorldMapOptions::kDefaultPoseToleranceM);
+  map->set_pose_tolerance_deg(WorldMapOptions::kDefaultPoseToleranceDeg);
   map->set_render_interval_ms(200);
-  // A dead band around 0.5: voxels the renderer wrote with next to no evidence stay unknown.
-  map->set_occupied_threshold(0.55);
-  map->set_free_threshold(0.45);
-  map->set_beam_cell_size_m(0.002);
+  map->set_occupied_threshold(kServiceOccupiedThreshold);
+  map->set_free_threshold(kServiceFreeThreshold);
+  map->set_beam_cell_size_m(kServiceBeamCellSizeM);
   auto* ingest = config.mutable_ingest();
   ingest->set_reliability("best_effort");
   ingest->set_max_points(4'000'000);

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <thread>
 
 namespace fusion::service {
@@ -15,6 +16,30 @@ bool Finite(const Eigen::Vector3d& v) { return v.allFinite(); }
 
 Polynomial2 PolynomialFromConfig(const fusion::v1::Polynomial2& p) {
   return {p.a2(), p.a1(), p.a0()};
+}
+
+// A WorldMapOptions::IsValid message (which starts with core's field path) as the MapConfig
+// field behind it and what to say: degrees in the file, radians in core; the beam and render
+// options flattened; a 0 in the file that core never sees explained.
+std::string MapConfigError(const std::string& why) {
+  struct Field {
+    const char* core;
+    const char* config;
+    const char* note;
+  };
+  static const Field kFields[] = {
+      {"pose_tolerance_rad", "pose_tolerance_deg", ""},
+      {"beam_grid.cell_size_m", "beam_cell_size_m", ""},
+      {"render.max_range_m", "max_range_m", " (0: each sensor's full range)"},
+      {"render.threads", "render_threads", " (0: one fewer than the hardware threads, at least 1)"},
+      {"occupancy_threshold", "occupied_threshold", ""},
+  };
+  const std::string core_field = why.substr(0, why.find(' '));
+  for (const Field& f : kFields) {
+    if (core_field == f.core) return std::string(f.config) + ": " + why + f.note;
+  }
+  // The same name in both (resolution_m, pose_tolerance_m), or a field the file cannot set.
+  return core_field + ":" + why.substr(core_field.size());
 }
 
 }  // namespace
@@ -117,10 +142,6 @@ std::optional<SensorSetup> SensorSetupFromConfig(const fusion::v1::SensorConfig&
 std::optional<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig& c,
                                                          std::string* error) {
   WorldMapOptions options;
-  if (!(c.resolution_m() >= 0.001 && c.resolution_m() <= 10.0)) {
-    *error = "resolution_m: " + std::to_string(c.resolution_m()) + " is outside [0.001, 10]";
-    return std::nullopt;
-  }
   options.resolution_m = c.resolution_m();
   const auto rule = FusionRuleFromName(c.fusion_rule());
   if (!rule) {
@@ -130,39 +151,26 @@ std::optional<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapCo
     return std::nullopt;
   }
   options.rule = *rule;
-  if (!(c.pose_tolerance_m() >= 0.0 && std::isfinite(c.pose_tolerance_m()))) {
-    *error = "pose_tolerance_m: must be finite and >= 0";
-    return std::nullopt;
-  }
-  if (!(c.pose_tolerance_deg() >= 0.0 && c.pose_tolerance_deg() <= 180.0)) {
-    *error = "pose_tolerance_deg: must lie in [0, 180]";
-    return std::nullopt;
-  }
   options.pose_tolerance_m = c.pose_tolerance_m();
   options.pose_tolerance_rad = c.pose_tolerance_deg() * kDegToRad;
-  if (!(c.beam_cell_size_m() >= 1e-4 && c.beam_cell_size_m() <= 1.0)) {
-    *error = "beam_cell_size_m: must lie in [0.0001, 1]";
-    return std::nullopt;
-  }
   options.beam_grid.cell_size_m = c.beam_cell_size_m();
   options.render.resolution_m = options.resolution_m;
-  if (!(c.max_range_m() >= 0.0 && std::isfinite(c.max_range_m()))) {
-    *error = "max_range_m: must be finite and >= 0 (0: each sensor's full range)";
-    return std::nullopt;
-  }
-  if (c.max_range_m() > 0.0) options.render.max_range_m = c.max_range_m();
-  if (c.render_threads() > 256) {
-    *error = "render_threads: " + std::to_string(c.render_threads()) +
-             " is outside 0..256 (0: one fewer than the hardware threads, at least 1)";
-    return std::nullopt;
-  }
-  // Default: leave one hardware thread to ingest and queries. On 2 cores a second render
-  // thread renders ~1.4x faster but lifts the p99 of small queries from ~1 ms to 2-4 ms while
+  options.occupancy_threshold = c.occupied_threshold();
+  // 0: each sensor's full range (core's default); anything else, negative and NaN included,
+  // goes to core to be checked.
+  if (c.max_range_m() != 0.0) options.render.max_range_m = c.max_range_m();
+  // 0: leave one hardware thread to ingest and queries. On 2 cores a second render thread
+  // renders ~1.4x faster but lifts the p99 of small queries from ~1 ms to 2-4 ms while
   // sensors stream (BENCHMARKS.md, service_bench).
-  options.render.threads =
-      c.render_threads() != 0
-          ? c.render_threads()
-          : std::max(1u, std::thread::hardware_concurrency() - 1);
+  options.render.threads = c.render_threads() != 0
+                               ? c.render_threads()
+                               : std::max(1u, std::thread::hardware_concurrency() - 1);
+  // Core checks its options (one place); the message names the configuration's field.
+  std::string why;
+  if (!options.IsValid(&why)) {
+    *error = MapConfigError(why);
+    return std::nullopt;
+  }
   return options;
 }
 

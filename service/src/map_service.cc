@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "fusion/core/forward_model.h"
 #include "fusion/core/octree_merge.h"
 #include "fusion/core/planes.h"
 #include "fusion/service/persistence.h"
@@ -196,8 +197,8 @@ grpc::ServerUnaryReactor* MapService::ListSensors(grpc::CallbackServerContext* c
       info->set_cols(sensor.spec.cols);
       info->set_rows(sensor.spec.rows);
       info->set_beams(sensor.spec.cols * sensor.spec.rows);
-      info->set_cells_per_beam(static_cast<std::uint64_t>(
-          std::ceil(sensor.spec.r_max_m / state_->config.map().beam_cell_size_m())));
+      info->set_cells_per_beam(
+          CellsPerBeam(sensor.spec.r_max_m, state_->config.map().beam_cell_size_m()));
       info->set_memory_bytes(c->memory_bytes);
       auto* out = info->mutable_counters();
       out->set_received(c->received + c->rejected.Total());

@@ -1,10 +1,8 @@
 #include "fusion/sim/ground_truth.h"
 
-#include <cmath>
-#include <limits>
-
 #include "fusion/core/beam_grid.h"
 #include "fusion/core/local_grid.h"
+#include "fusion/core/voxel_traversal.h"
 
 namespace fusion::sim {
 
@@ -27,48 +25,20 @@ VoxelLabels LabelVoxels(const Scene& scene, const std::vector<View>& views, doub
       const double t_end = hit ? hit->range_m : view.spec.r_max_m;
       const double t_start = view.spec.r_min_m;
       if (t_end <= t_start) continue;
-      // Amanatides & Woo from r_min to the hit.
-      const Eigen::Vector3d p0 = origin + dir * t_start;
-      long idx[3];
-      int step[3];
-      double t_max[3];
-      double t_delta[3];
-      for (int a = 0; a < 3; ++a) {
-        idx[a] = static_cast<long>(std::floor(p0[a] / res));
-        if (dir[a] > 0) {
-          step[a] = 1;
-          t_max[a] = t_start + ((idx[a] + 1) * res - p0[a]) / dir[a];
-          t_delta[a] = res / dir[a];
-        } else if (dir[a] < 0) {
-          step[a] = -1;
-          t_max[a] = t_start + (idx[a] * res - p0[a]) / dir[a];
-          t_delta[a] = -res / dir[a];
-        } else {
-          step[a] = 0;
-          t_max[a] = t_delta[a] = std::numeric_limits<double>::infinity();
+      // The renderer's traversal (fusion/core/voxel_traversal.h) from r_min to the hit, so the
+      // oracle labels the voxels the renderer writes, boundaries included.
+      ForEachVoxel(origin, dir, t_start, t_end, res, [&](const VoxelTraversal& voxel) {
+        const long idx[3] = {voxel.index(0), voxel.index(1), voxel.index(2)};
+        const octomap::OcTreeKey key = voxel.Key();
+        if (labels.labels.find(key) == labels.labels.end()) {
+          labels.labels.emplace(key, scene.SurfaceIntersects(voxel_box(idx)));
         }
-      }
-      double t = t_start;
-      while (true) {
-        const Eigen::AlignedBox3d box = voxel_box(idx);
-        const octomap::OcTreeKey key = KeyOfPoint(box.center(), res);
-        auto it = labels.labels.find(key);
-        if (it == labels.labels.end()) {
-          labels.labels.emplace(key, scene.SurfaceIntersects(box));
-        }
-        const int axis =
-            (t_max[0] < t_max[1]) ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
-        if (t_max[axis] >= t_end) break;  // this voxel holds the hit (or the end of range)
-        t = t_max[axis];
-        idx[axis] += step[axis];
-        t_max[axis] += t_delta[axis];
-      }
-      (void)t;
+      });
       if (hit) {
         // The hit point's voxel is occupied even if floating point put the
         // walk's last voxel a hair short of it.
         const Eigen::Vector3d p = origin + dir * hit->range_m;
-        labels.labels[KeyOfPoint(p, res)] = true;
+        if (InsideMap(p, res)) labels.labels[KeyOfPoint(p, res)] = true;
       }
     }
   }

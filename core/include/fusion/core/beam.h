@@ -184,6 +184,21 @@ class UllBeam {
   std::size_t Explode(const BeamContext& ctx, std::size_t begin, std::size_t end);
   double CompositeSum(const BeamContext& ctx, const Composite& c) const;
   void Renormalise(const BeamContext& ctx);
+  // Profile's steps. S at the start of every composite (s_at[k], k < list size) and after the
+  // last one (s_at[list size], B_{N+1} alone).
+  void TailsAtComposites(const BeamContext& ctx, double* s_at) const;
+  // The free zone from cell `start` on: sets out->mass_begin; returns S(start) (negative if
+  // start == N) and S where the zone ends.
+  struct FreeZoneTails {
+    double s_start;
+    double s_end;
+  };
+  FreeZoneTails ScanFreeZone(const BeamContext& ctx, const double* s_at, std::size_t start,
+                             double free_ratio, BeamProfileCells* out) const;
+  // TailDropCell from s_at: the first cell after `start` where S falls below
+  // fraction * s_start (N + 1 if B_{N+1} alone holds that much).
+  std::uint32_t FirstCellBelow(const BeamContext& ctx, const double* s_at, std::size_t start,
+                               double s_start, double fraction) const;
 
   std::vector<Composite> list_;
   std::vector<double> pool_;
@@ -218,8 +233,7 @@ class BeamStore {
   [[nodiscard]] virtual std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,
                                                    double fraction) const = 0;
   [[nodiscard]] virtual BeamProfileCells Profile(std::size_t beam, std::uint32_t from,
-                                                 double tail_fraction,
-                                                 double free_ratio) const = 0;
+                                                 double tail_fraction, double free_ratio) const = 0;
   [[nodiscard]] virtual bool Touched(std::size_t beam) const = 0;
   virtual void Reset() = 0;
   [[nodiscard]] virtual std::size_t MemoryBytes() const = 0;  // beams only, not the context

@@ -1,22 +1,40 @@
 // The plain types of a beam grid: its options, one reading along a beam, what an integration
-// did, and where a beam's information lies. No behaviour; everything beam-related includes it.
+// did, and where a beam's information lies. No behaviour beyond checking the options; everything
+// beam-related includes it.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
 
 namespace fusion {
 
 enum class BeamRepresentation { kDense, kUnrolledLinkedList };
 
 struct BeamGridOptions {
-  double cell_size_m = 0.001;
+  static constexpr double kDefaultCellSizeM = 0.001;
+  // Cell lengths IsValid accepts. Finer than 0.1 mm a cell resolves nothing a range sensor
+  // measures (sigma is millimetres) and an 8 m beam has 80 000 of them; coarser than 1 m a cell
+  // outgrows any voxel it is rendered into.
+  static constexpr double kMinCellSizeM = 1e-4;
+  static constexpr double kMaxCellSizeM = 1.0;
+  // prior_cell_occupancy: derive it from prior_reference_length_m.
+  static constexpr double kPriorFromReferenceLength = -1.0;
+  static constexpr double kDefaultPriorReferenceLengthM = 0.05;
+  static constexpr BeamRepresentation kDefaultRepresentation =
+      BeamRepresentation::kUnrolledLinkedList;
+
+  double cell_size_m = kDefaultCellSizeM;
   // Prior occupancy of each cell. Default (negative): chosen so that a run of cells
   // prior_reference_length_m long has prior occupancy 0.5, i.e. a map voxel of that size
   // starts unknown; p0 = 1 - 0.5^(cell_size / reference_length).
-  double prior_cell_occupancy = -1.0;
-  double prior_reference_length_m = 0.05;
-  BeamRepresentation representation = BeamRepresentation::kUnrolledLinkedList;
+  double prior_cell_occupancy = kPriorFromReferenceLength;
+  double prior_reference_length_m = kDefaultPriorReferenceLengthM;
+  BeamRepresentation representation = kDefaultRepresentation;
+
+  // True if a beam grid can be built with these options; else false, and *why (if not null)
+  // says what is wrong, starting with the field's name ("cell_size_m must lie in ...").
+  [[nodiscard]] bool IsValid(std::string* why = nullptr) const;
 };
 
 // What happened to one cloud: every point is accounted for in exactly one counter.

@@ -40,10 +40,15 @@ namespace fusion {
 // Normal density N(r; mu, sigma^2) (paper Eq. 15).
 [[nodiscard]] double NormalDensity(double r, double mu, double sigma);
 
+// Cells of a beam r_max_m long in cells of cell_size_m (BeamDiscretisation::cell_count, N):
+// ceil(r_max / delta), guarded against rounding (a 1 m beam of 1/21 m cells has 21, not 22),
+// at least 1. Both arguments finite and > 0, and r_max / delta within std::size_t.
+[[nodiscard]] std::size_t CellsPerBeam(double r_max_m, double cell_size_m);
+
 // The cell and outcome grid shared by a forward model and the beams it updates.
 struct BeamDiscretisation {
   double cell_size_m = 0.0;            // delta
-  std::size_t cell_count = 0;          // N = ceil(r_max / delta)
+  std::size_t cell_count = 0;          // N = CellsPerBeam(r_max, delta)
   std::size_t first_visible_cell = 0;  // cells below are blind (||B_i|| < r_min)
   double r_limit_m = 0.0;              // ranges above are the outcome `beyond`
   std::size_t bin_count = 0;           // K = ceil(r_limit / delta); outcome K = beyond

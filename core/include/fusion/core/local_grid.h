@@ -14,6 +14,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -26,10 +27,11 @@ namespace fusion {
 // logit(prior(segment length)), i.e. log-odds relative to what an untouched
 // beam reports, weighted by its crossing length.
 enum class VoxelCombine {
-  // Length-weighted mean of the segments' evidence (default; see
-  // docs/mapping.md).
+  // Length-weighted mean of the segments' evidence.
   kWeightedMeanLogOdds,
-  // The segment with the largest evidence wins (obstacle-conservative).
+  // The segment with the largest evidence wins (obstacle-conservative). The default
+  // (RenderOptions::kDefaultCombine): the best Brier score, recall and precision on the paper
+  // scene (docs/mapping.md, "Several segments in one voxel").
   kMaxLogOdds,
   // Sum of the segments' evidence (treats overlapping beams as independent
   // observations).
@@ -47,14 +49,28 @@ enum class RenderMethod {
 };
 
 struct RenderOptions {
+  static constexpr double kDefaultResolutionM = 0.02;
+  // Voxel edges IsValid accepts: at 1 mm OctoMap's keys reach +-33 m from the origin; at 10 m
+  // one voxel holds a building.
+  static constexpr double kMinResolutionM = 0.001;
+  static constexpr double kMaxResolutionM = 10.0;
+  static constexpr RenderMethod kDefaultMethod = RenderMethod::kProjective;
+  static constexpr VoxelCombine kDefaultCombine = VoxelCombine::kMaxLogOdds;
   static constexpr double kDefaultTailMass = 1e-2;
   static constexpr double kDefaultFreeRatio = 0.03;
   static constexpr int kDefaultMaxSubraysPerAxis = 3;
+  static constexpr double kDefaultMaxRangeM = 1e9;  // no limit but the beams' own length
+  static constexpr bool kDefaultFollowSurfaces = true;
+  static constexpr double kDefaultMinIncidenceDeg = 3.0;
+  static constexpr int kDefaultMaxSurfaceSubraysPerAxis = 8;
   static constexpr double kDefaultMaxAbsLogOdds = 12.0;
+  static constexpr unsigned kDefaultThreads = 1;
+  // Each thread renders into a grid of its own: more than this is a mistake, not a machine.
+  static constexpr unsigned kMaxThreads = 256;
 
-  double resolution_m = 0.02;
-  RenderMethod method = RenderMethod::kProjective;
-  VoxelCombine combine = VoxelCombine::kMaxLogOdds;
+  double resolution_m = kDefaultResolutionM;
+  RenderMethod method = kDefaultMethod;
+  VoxelCombine combine = kDefaultCombine;
   // Projective render: a beam's free zone ends at the first cell whose occupancy p(m) exceeds
   // this fraction of the prior's (BeamGrid::Profile); a block wholly in front of the free zone's
   // end in every beam it overlaps is free as a whole, its evidence about log(free_ratio) or less.
@@ -68,21 +84,25 @@ struct RenderOptions {
   // range / resolution) <= this.
   int max_subrays_per_axis = kDefaultMaxSubraysPerAxis;
   // Rays are traced no further than this (metres from the sensor origin).
-  double max_range_m = 1e9;
+  double max_range_m = kDefaultMaxRangeM;
   // A beam whose surface runs on into a neighbouring beam's (their first-hit medians differ by
   // less than the incidence min_incidence_deg allows) is traced with sub-rays across its sector,
   // each carrying the beam's first-hit distribution moved to the range interpolated between the
   // two surfaces: a floor seen at a shallow angle is then continuous between the rows of beams
   // (docs/mapping.md, "Surfaces between beams"). At most max_surface_subrays_per_axis a side.
   // With the max voxel rule only.
-  bool follow_surfaces = true;
-  double min_incidence_deg = 3.0;
-  int max_surface_subrays_per_axis = 8;
+  bool follow_surfaces = kDefaultFollowSurfaces;
+  double min_incidence_deg = kDefaultMinIncidenceDeg;
+  int max_surface_subrays_per_axis = kDefaultMaxSurfaceSubraysPerAxis;
   // Each segment's evidence is clamped to +-this (natural log-odds).
   double max_abs_log_odds = kDefaultMaxAbsLogOdds;
   // Threads that trace beams (each into its own grid, merged at the end; the result is the
   // same up to float rounding of the mean / pool sums). 0: one per hardware thread.
-  unsigned threads = 1;
+  unsigned threads = kDefaultThreads;
+
+  // True if a render can run with these options; else false, and *why (if not null) says what
+  // is wrong, starting with the field's name ("max_range_m must be finite and > 0").
+  [[nodiscard]] bool IsValid(std::string* why = nullptr) const;
 };
 
 struct RenderStats {
@@ -115,7 +135,8 @@ struct RenderStats {
 // OcTreeKey).
 class LocalGrid {
  public:
-  explicit LocalGrid(double resolution_m, VoxelCombine combine = VoxelCombine::kMaxLogOdds);
+  explicit LocalGrid(double resolution_m,
+                     VoxelCombine combine = RenderOptions::kDefaultCombine);
 
   [[nodiscard]] double resolution_m() const { return resolution_m_; }
   [[nodiscard]] VoxelCombine combine() const { return combine_; }

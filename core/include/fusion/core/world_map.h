@@ -48,15 +48,19 @@
 namespace fusion {
 
 struct WorldMapOptions {
-  static constexpr double kDefaultResolutionM = 0.02;
+  static constexpr double kDefaultResolutionM = RenderOptions::kDefaultResolutionM;
+  static constexpr FusionRule kDefaultRule = FusionRule::kIndependentOpinionPool;
   static constexpr double kDefaultPoseToleranceM = 0.01;
-  static constexpr double kDefaultPoseToleranceRad = 0.0175;  // ~1 degree
+  static constexpr double kDefaultPoseToleranceDeg = 1.0;
+  static constexpr double kDefaultPoseToleranceRad =
+      kDefaultPoseToleranceDeg * 3.14159265358979323846 / 180.0;
   static constexpr double kDefaultClampingMin = FusionPolicy::kDefaultClampingMin;
   static constexpr double kDefaultClampingMax = FusionPolicy::kDefaultClampingMax;
   static constexpr double kDefaultBeamPriorLengthM = 1.0;
+  static constexpr double kDefaultOccupancyThreshold = 0.5;
 
   double resolution_m = kDefaultResolutionM;
-  FusionRule rule = FusionRule::kIndependentOpinionPool;
+  FusionRule rule = kDefaultRule;
   // render.resolution_m is overridden by resolution_m.
   RenderOptions render;
   // beam_grid.prior_reference_length_m is overridden by beam_prior_length_m.
@@ -76,7 +80,13 @@ struct WorldMapOptions {
   double clamping_max_probability = kDefaultClampingMax;
   // The trees' OcTree::setOccupancyThres (what OctoMap's own readers, castRay and the .bt
   // writer, call occupied).
-  double occupancy_threshold = 0.5;
+  double occupancy_threshold = kDefaultOccupancyThreshold;
+
+  // True if a WorldMap can run with these options (its sensors' beam grid and render options,
+  // SensorGridOptions and MapRenderOptions, included); else false, and *why (if not null) says
+  // what is wrong, starting with the field's path from this struct ("resolution_m must ...",
+  // "beam_grid.cell_size_m must ...", "render.max_range_m must ...").
+  [[nodiscard]] bool IsValid(std::string* why = nullptr) const;
 };
 
 // The beam grid options a sensor of this map gets (the beam prior applied).
@@ -105,7 +115,7 @@ struct FuseStats {
 // One published version of the map.
 struct Publication {
   std::shared_ptr<const octomap::OcTree> tree;  // never null
-  MapChanges changes;                            // changes.version is the map's version
+  MapChanges changes;                           // changes.version is the map's version
 };
 
 class WorldMap {

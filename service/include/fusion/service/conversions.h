@@ -34,9 +34,10 @@ struct SensorSetup {
 };
 
 // Thresholds that turn an occupancy probability into a state.
+// Default: core's one threshold, no dead band (fusiond deploys one: config.cc, DefaultConfig).
 struct StateThresholds {
-  double occupied = 0.5;  // p >= occupied: occupied
-  double free = 0.5;      // p < free: free (else unknown)
+  double occupied = WorldMapOptions::kDefaultOccupancyThreshold;  // p >= occupied: occupied
+  double free = WorldMapOptions::kDefaultOccupancyThreshold;      // p < free: free (else unknown)
 };
 
 // Config -> core. Return std::nullopt with *error naming the field (relative to the message).
