@@ -115,8 +115,11 @@ int Render(Context& ctx, const Args& args) {
       !fusion::clients::ParseFinite(args.Get("--min-probability"), &options.min_probability)) {
     return Usage("bad --min-probability");
   }
-  if (!args.Get("--size").empty() && std::sscanf(args.Get("--size").c_str(), "%dx%d",
-                                                 &options.width_px, &options.height_px) != 2) {
+  const std::string size = args.Get("--size");
+  int size_chars = 0;  // the whole value must be WxH: "64x48px" is a typo, not 64x48
+  if (!size.empty() && (std::sscanf(size.c_str(), "%dx%d%n", &options.width_px, &options.height_px,
+                                    &size_chars) != 2 ||
+                        size_chars != static_cast<int>(size.size()))) {
     return Usage("--size takes WxH");
   }
   if (options.width_px <= 0 || options.height_px <= 0 || options.width_px > 8192 ||

@@ -73,7 +73,8 @@ TEST(FusionctlCommandLineTest, ExtraOrMissingArgumentsAreUsageErrors) {
         {"watch", "--count", "-1"},
         {"planes", "--max", "65"},
         {"stats", "--timeout", "0"},
-        {"render", "map.png", "--color"}}) {
+        {"render", "map.png", "--color"},
+        {"render", "map.png", "--size", "64x48px"}}) {
     std::vector<std::string> args = {"--server", kNowhere};
     args.insert(args.end(), words.begin(), words.end());
     const auto r = RunFusionctl(args);
