@@ -3,6 +3,7 @@
 #include <octomap/OcTree.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -18,7 +19,7 @@ namespace {
 bool FetchSnapshot(Context& ctx, fusion::v1::GetSnapshotRequest::Format format, std::string* bytes,
                    unsigned long long* version, int* rc) {
   grpc::ClientContext context;
-  SetDeadline(&context, std::max(ctx.timeout_s, 60.0));
+  PrepareCall(ctx, &context, ctx.timeout_s);
   fusion::v1::GetSnapshotRequest request;
   request.set_format(format);
   auto reader = ctx.stub->GetSnapshot(&context, request);
@@ -45,13 +46,23 @@ bool FetchSnapshot(Context& ctx, fusion::v1::GetSnapshotRequest::Format format, 
   return true;
 }
 
+// Whether `path` ends in `extension` (".png"), in any case.
+bool HasExtension(const std::string& path, const std::string& extension) {
+  if (path.size() <= extension.size()) return false;
+  for (std::size_t i = 0; i < extension.size(); ++i) {
+    const char c = path[path.size() - extension.size() + i];
+    if (std::tolower(static_cast<unsigned char>(c)) != extension[i]) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 int Snapshot(Context& ctx, const Args& args) {
   if (args.positional.size() != 1) return Usage("snapshot needs FILE.bt or FILE.ot");
   const std::string& path = args.positional[0];
-  const bool bt = path.size() > 3 && path.compare(path.size() - 3, 3, ".bt") == 0;
-  const bool ot = path.size() > 3 && path.compare(path.size() - 3, 3, ".ot") == 0;
+  const bool bt = HasExtension(path, ".bt");
+  const bool ot = HasExtension(path, ".ot");
   if (!bt && !ot) return Usage("snapshot file must end in .bt or .ot");
   std::string bytes;
   unsigned long long version = 0;
@@ -67,12 +78,23 @@ int Snapshot(Context& ctx, const Args& args) {
   if (!out.flush()) {
     return fusion::clients::Fail(kTool, "cannot write '" + path + "'");
   }
-  std::printf("wrote %s: %zu bytes, map version %llu\n", path.c_str(), bytes.size(), version);
+  if (ctx.json) {
+    PrintJsonFields({{"path", path}, {"format", bt ? "bt" : "ot"}},
+                    {{"bytes", static_cast<double>(bytes.size())},
+                     {"map_version", static_cast<double>(version)}});
+  } else {
+    std::printf("wrote %s: %zu bytes, map version %llu\n", path.c_str(), bytes.size(), version);
+  }
   return fusion::clients::kExitOk;
 }
 
 int Render(Context& ctx, const Args& args) {
   if (args.positional.size() != 1) return Usage("render needs FILE.png");
+  // The renderer writes PNG only: x.jpg would hold PNG bytes under a JPEG name.
+  if (!HasExtension(args.positional[0], ".png")) {
+    return Usage("render writes PNG only: the file must end in .png, not '" + args.positional[0] +
+                 "'");
+  }
   fusion::render::RenderOptions options;
   const std::string color = args.Get("--color", "height");
   if (color == "height")
@@ -93,8 +115,11 @@ int Render(Context& ctx, const Args& args) {
       !fusion::clients::ParseFinite(args.Get("--min-probability"), &options.min_probability)) {
     return Usage("bad --min-probability");
   }
-  if (!args.Get("--size").empty() && std::sscanf(args.Get("--size").c_str(), "%dx%d",
-                                                 &options.width_px, &options.height_px) != 2) {
+  const std::string size = args.Get("--size");
+  int size_chars = 0;  // the whole value must be WxH: "64x48px" is a typo, not 64x48
+  if (!size.empty() && (std::sscanf(size.c_str(), "%dx%d%n", &options.width_px, &options.height_px,
+                                    &size_chars) != 2 ||
+                        size_chars != static_cast<int>(size.size()))) {
     return Usage("--size takes WxH");
   }
   if (options.width_px <= 0 || options.height_px <= 0 || options.width_px > 8192 ||
@@ -118,26 +143,40 @@ int Render(Context& ctx, const Args& args) {
   if (!fusion::render::WritePng(args.positional[0], image, &error)) {
     return fusion::clients::Fail(kTool, error);
   }
-  std::printf("wrote %s: %dx%d, %zu occupied voxels drawn, map version %llu\n",
-              args.positional[0].c_str(), image.width, image.height, image.voxels_drawn, version);
+  if (ctx.json) {
+    PrintJsonFields({{"path", args.positional[0]}},
+                    {{"width_px", image.width},
+                     {"height_px", image.height},
+                     {"voxels_drawn", static_cast<double>(image.voxels_drawn)},
+                     {"map_version", static_cast<double>(version)}});
+  } else {
+    std::printf("wrote %s: %dx%d, %zu occupied voxels drawn, map version %llu\n",
+                args.positional[0].c_str(), image.width, image.height, image.voxels_drawn, version);
+  }
   return fusion::clients::kExitOk;
 }
 
 int Watch(Context& ctx, const Args& args) {
   fusion::v1::StreamUpdatesRequest request;
-  request.set_since_version(std::strtoull(args.Get("--since", "0").c_str(), nullptr, 10));
+  unsigned long long since = 0, count = 0;
+  if (!OptionUint(args, "--since", 0, &since)) return Usage("--since takes a map version");
+  if (!OptionUint(args, "--count", 0, &count)) return Usage("--count takes a count of versions");
+  request.set_since_version(since);
   const bool versions_only = args.Has("--versions-only");
   request.set_versions_only(versions_only);
-  const long count = std::atol(args.Get("--count", "0").c_str());
   grpc::ClientContext context;
+  PrepareCall(ctx, &context, ctx.timeout_s);  // none unless --timeout
   auto reader = ctx.stub->StreamUpdates(&context, request);
   fusion::v1::MapUpdate update;
-  long versions = 0;
+  unsigned long long versions = 0;
   std::size_t voxels = 0;
   while (reader->Read(&update)) {
     voxels += static_cast<std::size_t>(update.voxels_size());
+    if (ctx.json) PrintJson(update);  // every message: a version may span several
     if (!update.complete()) continue;
-    if (versions_only) {
+    if (ctx.json) {
+      // printed above
+    } else if (versions_only) {
       std::printf("version %llu (from %llu)\n", (unsigned long long)update.map_version(),
                   (unsigned long long)update.from_version());
     } else {

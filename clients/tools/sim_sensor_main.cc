@@ -155,7 +155,12 @@ std::optional<int> ParseFlags(int argc, char** argv, Options* o) {
     } else if (arg.size() > 2 && arg[0] == '-') {
       std::string v;
       if (!fusion::clients::TakeValue(argc, argv, &i, &v)) {
-        return fusion::clients::UsageError(kTool, arg + " needs a value");
+        // An unknown option last on the line is unknown, not one that lacks its value.
+        Options probe;
+        Status ignored;
+        const bool known = ApplyValue(arg, "1", &probe, &ignored);
+        return fusion::clients::UsageError(
+            kTool, known ? arg + " needs a value" : "unknown option " + arg);
       }
       if (!ApplyValue(arg, v, o, &s)) {
         return fusion::clients::UsageError(kTool, "unknown option " + arg);
