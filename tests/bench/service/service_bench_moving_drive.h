@@ -23,6 +23,7 @@
 #include "fusion/sim/experiment.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
+#include "../../support/waypoint_lap.h"
 #include "fusion/v1/map_service.grpc.pb.h"
 #include "service_bench_common.h"
 #include "service_bench_fusiond.h"
@@ -39,29 +40,14 @@ inline const std::string kDeploymentConfig =
 
 // A waypoint of the rig (the SR-3000's optical frame): time, position in the world, yaw to the
 // left (no pitch).
-struct Waypoint {
-  double t_s, x_m, y_m, z_m, yaw_deg;
-};
-
 // One lap of 10 s from the paper's mounting (the origin, looking along +x): forward 0.85 m
 // while yawing to +20 deg, then back while yawing back: 0.17 m/s and 4 deg/s, 1.7 m per lap.
 // The board (x = 1.75 m) stays at least 0.9 m ahead. Longer runs repeat the lap.
-inline const std::vector<Waypoint> kLap = {
+inline const std::vector<fusion::testing::Waypoint> kLap = {
     {0.0, 0.0, 0.0, 0.0, 0.0}, {5.0, 0.85, 0.0, 0.0, 20.0}, {10.0, 0.0, 0.0, 0.0, 0.0}};
 
 // The SR-3000's pose at t_s: the lap's waypoints, linearly interpolated.
-inline Eigen::Isometry3d RigPoseAt(double t_s) {
-  const double lap_t_s = std::fmod(t_s, kLap.back().t_s);
-  std::size_t i = 1;
-  while (i + 1 < kLap.size() && lap_t_s > kLap[i].t_s) ++i;
-  const Waypoint& a = kLap[i - 1];
-  const Waypoint& b = kLap[i];
-  const double f = (lap_t_s - a.t_s) / (b.t_s - a.t_s);
-  const auto mix = [f](double u, double v) { return u + f * (v - u); };
-  constexpr double kRadPerDeg = M_PI / 180.0;
-  const Eigen::Vector3d position_m(mix(a.x_m, b.x_m), mix(a.y_m, b.y_m), mix(a.z_m, b.z_m));
-  return sim::ForwardLookingPose(position_m, mix(a.yaw_deg, b.yaw_deg) * kRadPerDeg);
-}
+inline Eigen::Isometry3d RigPoseAt(double t_s) { return fusion::testing::PoseOnLap(kLap, t_s); }
 
 // A simulated sensor on the path. Its frames are simulated before the run, each at the pose
 // the path gives at its publication time k / rate_hz, so the publisher threads only write: the

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "../../support/dds_publisher.h"
+#include "../../support/waypoint_lap.h"
 #include "fusion/sim/experiment.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
@@ -22,30 +23,16 @@ namespace fusion::soak {
 using SoakClock = std::chrono::steady_clock;
 
 // A waypoint of the rig (the SR-3000's optical frame): time, position, yaw to the left.
-struct Waypoint {
-  double t_s, x_m, y_m, z_m, yaw_deg;
-};
-
 // A closed 20 s lap in front of the board (x = 1.75 m, which stays >= 0.95 m ahead): forward
 // while turning left, across to the left, back to the right, home. 0.07-0.16 m/s, <= 5 deg/s.
-inline const std::vector<Waypoint> kLap = {{0, 0.0, 0.0, 0.0, 0},
+inline const std::vector<fusion::testing::Waypoint> kLap = {{0, 0.0, 0.0, 0.0, 0},
                                            {5, 0.8, 0.0, 0.0, 15},
                                            {10, 0.6, 0.4, 0.05, -10},
                                            {15, 0.2, -0.3, -0.05, 10},
                                            {20, 0.0, 0.0, 0.0, 0}};
 constexpr double kLapS = 20.0;
 
-inline Eigen::Isometry3d RigPoseAt(double t_s) {
-  const double lap_t_s = std::fmod(t_s, kLapS);
-  std::size_t i = 1;
-  while (i + 1 < kLap.size() && lap_t_s > kLap[i].t_s) ++i;
-  const Waypoint& a = kLap[i - 1];
-  const Waypoint& b = kLap[i];
-  const double f = (lap_t_s - a.t_s) / (b.t_s - a.t_s);
-  const auto mix = [f](double u, double v) { return u + f * (v - u); };
-  const Eigen::Vector3d position_m(mix(a.x_m, b.x_m), mix(a.y_m, b.y_m), mix(a.z_m, b.z_m));
-  return sim::ForwardLookingPose(position_m, mix(a.yaw_deg, b.yaw_deg) * M_PI / 180.0);
-}
+inline Eigen::Isometry3d RigPoseAt(double t_s) { return fusion::testing::PoseOnLap(kLap, t_s); }
 
 // One frame as TestPublisher writes it: points, flags and the pose.
 inline testing::TestCloud ToTestCloud(const std::string& id, sim::OrganizedCloud frame,
