@@ -133,6 +133,31 @@ TEST_F(FusiondSecurityTest, TokensDecideWhoMayCallWhat) {
   }
   // An admin token resets.
   EXPECT_TRUE(Reset(grpc::CreateChannel(address, TlsCredentials(false, admin))).ok());
+
+  // fusionctl with the same files: stats with the read token, reset refused with it and done
+  // with the admin token, nothing without a token.
+  const auto fusionctl = [&](const std::vector<std::string>& args, std::string* out) {
+    std::vector<std::string> argv{std::string(FUSION_BINARY_DIR) + "/clients/fusionctl",
+                                  "--server", address, "--tls-ca", certs_ + "/ca.pem"};
+    argv.insert(argv.end(), args.begin(), args.end());
+    Subprocess process({"/bin/sh", "-c", [&] {
+                          std::string command = "exec";
+                          for (const auto& a : argv) command += " '" + a + "'";
+                          return command + " 2>&1";
+                        }()});
+    process.WaitForOutput("(?!)", 20s);
+    const int code = process.Wait(5s);
+    *out = process.output();
+    return code;
+  };
+  std::string out;
+  EXPECT_EQ(fusionctl({"--token-file", certs_ + "/read.token", "stats"}, &out), 0) << out;
+  EXPECT_NE(out.find("clouds_in_map"), std::string::npos) << out;
+  EXPECT_NE(fusionctl({"--token-file", certs_ + "/read.token", "reset"}, &out), 0) << out;
+  EXPECT_NE(out.find("PERMISSION_DENIED"), std::string::npos) << out;
+  EXPECT_EQ(fusionctl({"--token-file", certs_ + "/admin.token", "reset"}, &out), 0) << out;
+  EXPECT_NE(fusionctl({"stats"}, &out), 0) << out;
+  EXPECT_NE(out.find("UNAUTHENTICATED"), std::string::npos) << out;
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
 }
 
