@@ -66,7 +66,7 @@ grpc::Status Call(const Context& ctx,
   return (ctx.stub.get()->*method)(&context, request, reply);
 }
 // "OK", "INVALID_ARGUMENT", ... (grpc::StatusCode's names).
-const char* StatusCodeName(grpc::StatusCode code);
+const char* StatusCodeName(int code);
 // Reports a failed call: unreachable service, deadline or the service's error with its status
 // name and detail; returns kExitFailure.
 int Failed(const Context& ctx, const grpc::Status& status);

@@ -91,7 +91,7 @@ void PrepareCall(const Context& ctx, grpc::ClientContext* context, double timeou
   AddBearerToken(ctx.bearer_token, context);
 }
 
-const char* StatusCodeName(grpc::StatusCode code) {
+const char* StatusCodeName(int code) {
   // grpc::StatusCode's values are 0..16 in this order (grpc/status.h, fixed by the protocol).
   static const char* const kNames[] = {"OK",
                                        "CANCELLED",
