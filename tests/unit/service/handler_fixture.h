@@ -4,7 +4,6 @@
 // along +z at a wall, the plane z = kWallZ, every beam reading it.
 #pragma once
 
-#include <google/protobuf/text_format.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
@@ -18,6 +17,7 @@
 #include "fusion/service/map_service.h"
 #include "fusion/service/map_stack.h"
 #include "fusion/v1/map_service.grpc.pb.h"
+#include "text_proto.h"
 
 namespace fusion::service::testing {
 
@@ -26,14 +26,6 @@ namespace v1 = fusion::v1;
 
 constexpr double kWallZ = 2.025;  // the middle of a voxel at 5 cm
 constexpr double kResolutionM = 0.05;
-
-// A message from its text format; fails the test on a typo.
-template <typename Message>
-Message Text(const std::string& text) {
-  Message message;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &message)) << text;
-  return message;
-}
 
 inline std::string PointText(const Eigen::Vector3d& p) {
   return "x: " + std::to_string(p.x()) + " y: " + std::to_string(p.y()) +

@@ -3,22 +3,17 @@
 // page tokens that round-trip.
 #include "fusion/service/request_checks.h"
 
-#include <google/protobuf/text_format.h>
 #include <gtest/gtest.h>
 
 #include "fusion/service/config.h"
+#include "text_proto.h"
 
 namespace fusion::service {
 namespace {
 
 using grpc::StatusCode;
 
-template <typename Message>
-Message Text(const std::string& text) {
-  Message message;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &message)) << text;
-  return message;
-}
+using testing::Text;
 
 fusion::v1::QueryLimits Limits() {
   auto limits = DefaultConfig().limits();
