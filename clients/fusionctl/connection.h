@@ -8,7 +8,7 @@
 #include <memory>
 #include <string>
 
-#include "fusion/clients/status.h"
+#include "fusion/core/status.h"
 
 namespace fusionctl {
 
@@ -24,13 +24,13 @@ struct ConnectionOptions {
 // fields still empty (flags win over the environment).
 void ApplyEnvironment(ConnectionOptions* options);
 // Checks the combination: a client certificate and its key go together, and both need --tls-ca.
-fusion::clients::Status CheckConnectionOptions(const ConnectionOptions& options);
+fusion::Status CheckConnectionOptions(const ConnectionOptions& options);
 // The first line of `path` with surrounding whitespace removed; an error if the file cannot be
 // read or the line is empty.
-fusion::clients::Status ReadBearerToken(const std::string& path, std::string* token);
+fusion::Status ReadBearerToken(const std::string& path, std::string* token);
 // A channel to options.server: SslCredentials (roots from tls_ca_path, the client key pair when
 // given) with TLS, insecure without. Errors: a TLS file that cannot be read.
-fusion::clients::Status MakeChannel(const ConnectionOptions& options,
+fusion::Status MakeChannel(const ConnectionOptions& options,
                                     std::shared_ptr<grpc::Channel>* channel);
 // Adds "authorization: Bearer <token>" to a call; nothing for an empty token.
 void AddBearerToken(const std::string& token, grpc::ClientContext* context);

@@ -11,14 +11,14 @@
 namespace fusionctl {
 namespace {
 
-fusion::clients::Status ReadFile(const std::string& what, const std::string& path,
+fusion::Status ReadFile(const std::string& what, const std::string& path,
                                  std::string* contents) {
   std::ifstream in(path, std::ios::binary);
   std::ostringstream text;
   text << in.rdbuf();
-  if (!in) return fusion::clients::Status::Error("cannot read " + what + " '" + path + "'");
+  if (!in) return fusion::Status::Error("cannot read " + what + " '" + path + "'");
   *contents = text.str();
-  return fusion::clients::Status::Ok();
+  return fusion::Status::Ok();
 }
 
 void FromEnvironment(const char* name, std::string* value) {
@@ -35,35 +35,35 @@ void ApplyEnvironment(ConnectionOptions* options) {
   FromEnvironment("FUSION_TOKEN_FILE", &options->token_file_path);
 }
 
-fusion::clients::Status CheckConnectionOptions(const ConnectionOptions& options) {
+fusion::Status CheckConnectionOptions(const ConnectionOptions& options) {
   if (options.tls_cert_path.empty() != options.tls_key_path.empty()) {
-    return fusion::clients::Status::Error("--tls-cert and --tls-key go together");
+    return fusion::Status::Error("--tls-cert and --tls-key go together");
   }
   if (!options.tls_cert_path.empty() && options.tls_ca_path.empty()) {
-    return fusion::clients::Status::Error("--tls-cert and --tls-key need --tls-ca");
+    return fusion::Status::Error("--tls-cert and --tls-key need --tls-ca");
   }
-  return fusion::clients::Status::Ok();
+  return fusion::Status::Ok();
 }
 
-fusion::clients::Status ReadBearerToken(const std::string& path, std::string* token) {
+fusion::Status ReadBearerToken(const std::string& path, std::string* token) {
   std::string contents;
   if (auto s = ReadFile("token file", path, &contents); !s.ok()) return s;
   const std::string line = contents.substr(0, contents.find('\n'));
   const char* kSpace = " \t\r\n\f\v";
   const auto first = line.find_first_not_of(kSpace);
   if (first == std::string::npos) {
-    return fusion::clients::Status::Error("token file '" + path +
+    return fusion::Status::Error("token file '" + path +
                                           "' has no token on its first line");
   }
   *token = line.substr(first, line.find_last_not_of(kSpace) - first + 1);
-  return fusion::clients::Status::Ok();
+  return fusion::Status::Ok();
 }
 
-fusion::clients::Status MakeChannel(const ConnectionOptions& options,
+fusion::Status MakeChannel(const ConnectionOptions& options,
                                     std::shared_ptr<grpc::Channel>* channel) {
   if (options.tls_ca_path.empty()) {
     *channel = grpc::CreateChannel(options.server, grpc::InsecureChannelCredentials());
-    return fusion::clients::Status::Ok();
+    return fusion::Status::Ok();
   }
   grpc::SslCredentialsOptions ssl;
   if (auto s = ReadFile("--tls-ca", options.tls_ca_path, &ssl.pem_root_certs); !s.ok()) return s;
@@ -76,7 +76,7 @@ fusion::clients::Status MakeChannel(const ConnectionOptions& options,
     }
   }
   *channel = grpc::CreateChannel(options.server, grpc::SslCredentials(ssl));
-  return fusion::clients::Status::Ok();
+  return fusion::Status::Ok();
 }
 
 void AddBearerToken(const std::string& token, grpc::ClientContext* context) {

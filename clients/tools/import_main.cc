@@ -15,7 +15,7 @@
 
 namespace {
 
-using fusion::clients::Status;
+using fusion::Status;
 
 constexpr const char* kTool = "fusion-import";
 

@@ -15,7 +15,7 @@
 
 namespace {
 
-using fusion::clients::Status;
+using fusion::Status;
 using Clock = std::chrono::steady_clock;
 
 constexpr const char* kTool = "fusion-record";

@@ -3,6 +3,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 namespace fusion {
 namespace {
@@ -256,7 +257,37 @@ std::vector<Plane> ExtractPlanes(const std::vector<Peak>& peaks, std::vector<Wei
 
 }  // namespace
 
+bool HoughOptions::IsValid(std::string* why) const {
+  const auto fail = [why](const char* message) {
+    if (why != nullptr) *why = message;
+    return false;
+  };
+  const auto positive = [](double v, double max) { return v > 0.0 && v <= max; };
+  const auto non_negative = [](double v) { return v >= 0.0 && std::isfinite(v); };
+  if (!positive(phi_bin_rad, kPi)) return fail("phi_bin_rad must lie in (0, pi]");
+  if (!positive(theta_bin_rad, kPi)) return fail("theta_bin_rad must lie in (0, pi]");
+  if (!positive(d_bin_m, 1e6)) return fail("d_bin_m must be finite and > 0");
+  if (!(min_probability >= 0.0 && min_probability < 1.0)) {
+    return fail("min_probability must lie in [0, 1)");
+  }
+  if (max_planes == 0) return fail("max_planes must be >= 1");
+  if (!non_negative(nms_angle_rad)) return fail("nms_angle_rad must be finite and >= 0");
+  if (!non_negative(nms_distance_m)) return fail("nms_distance_m must be finite and >= 0");
+  if (!non_negative(support_distance_m)) {
+    return fail("support_distance_m must be finite and >= 0");
+  }
+  if (refine_iterations < 0) return fail("refine_iterations must be >= 0");
+  if (region && (!region->min().allFinite() || !region->max().allFinite() ||
+                 (region->min().array() > region->max().array()).any())) {
+    return fail("region must be finite with min <= max");
+  }
+  return true;
+}
+
 PlaneSearch SearchPlanes(const octomap::OcTree& tree, const HoughOptions& options) {
+  if (std::string why; !options.IsValid(&why)) {
+    throw std::invalid_argument("HoughOptions: " + why);
+  }
   PlaneSearch search;
   Poller poller(options.stop);
   const auto stopped = [&] {

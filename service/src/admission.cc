@@ -1,5 +1,6 @@
 #include "fusion/service/admission.h"
 
+#include <malloc.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -36,7 +37,8 @@ bool IngestPressure::Behind(const IngestQueues& queues, std::chrono::steady_cloc
   return dropped_recently_ && now - last_drop_ < kWindow;
 }
 
-QueryPool::QueryPool(std::size_t threads, int nice) {
+QueryPool::QueryPool(std::size_t threads, int nice, std::function<void()> after_task)
+    : after_task_(std::move(after_task)) {
   for (std::size_t i = 0; i < threads; ++i) threads_.emplace_back([this, nice] { Run(nice); });
 }
 
@@ -69,7 +71,18 @@ void QueryPool::Run(int nice) {
       tasks_.pop_front();
     }
     task();
+    task = nullptr;  // its captures are freed before after_task runs
+    if (after_task_) after_task_();
   }
+}
+
+bool HeapTrimmer::MaybeTrim(std::chrono::steady_clock::time_point now) {
+  std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+  if (!lock.owns_lock() || (trimmed_ && now - last_ < min_interval_)) return false;
+  trimmed_ = true;
+  last_ = now;
+  ::malloc_trim(0);
+  return true;
 }
 
 bool SetThreadNice(int nice) {

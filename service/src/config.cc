@@ -35,117 +35,111 @@ bool EndsWith(const std::string& s, const std::string& suffix) {
          s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-bool Fail(std::string* error, const std::string& field, const std::string& message) {
-  *error = field + ": " + message;
-  return false;
+Status Fail(const std::string& field, const std::string& message) {
+  return Status::Error(field + ": " + message);
 }
 
-bool ValidateSensors(const fusion::v1::ServiceConfig& config, std::string* error) {
+Status ValidateSensors(const fusion::v1::ServiceConfig& config) {
   std::set<std::string> ids;
   for (int i = 0; i < config.sensors_size(); ++i) {
     const auto& sensor = config.sensors(i);
     const std::string field = "sensors[" + std::to_string(i) + "]";
-    std::string detail;
-    if (!SensorSetupFromConfig(sensor, &detail)) {
-      *error = field + "." + detail;
-      return false;
+    if (const auto setup = SensorSetupFromConfig(sensor); !setup.ok()) {
+      return Status::Error(field + "." + setup.status().message());
     }
     if (!ids.insert(sensor.id()).second) {
-      return Fail(error, field + ".id", "'" + sensor.id() + "' appears twice");
+      return Fail(field + ".id", "'" + sensor.id() + "' appears twice");
     }
   }
-  return true;
+  return Status::Ok();
 }
 
-bool ValidateMap(const fusion::v1::MapConfig& map, std::string* error) {
-  std::string detail;
-  if (!WorldMapOptionsFromConfig(map, &detail)) {
-    *error = "map." + detail;
-    return false;
+Status ValidateMap(const fusion::v1::MapConfig& map) {
+  if (const auto options = WorldMapOptionsFromConfig(map); !options.ok()) {
+    return Status::Error("map." + options.status().message());
   }
   if (map.render_interval_ms() == 0 || map.render_interval_ms() > 600'000) {
-    return Fail(error, "map.render_interval_ms",
+    return Fail("map.render_interval_ms",
                 std::to_string(map.render_interval_ms()) + " is outside 1..600000");
   }
   // occupied_threshold is core's WorldMapOptions::occupancy_threshold, checked above; the free
   // threshold is the service's alone (StateThresholds).
   if (!(map.free_threshold() > 0.0) || map.free_threshold() > map.occupied_threshold()) {
-    return Fail(error, "map.free_threshold", "must lie in (0, occupied_threshold]");
+    return Fail("map.free_threshold", "must lie in (0, occupied_threshold]");
   }
-  return true;
+  return Status::Ok();
 }
 
 // A beam's cells (r_max_m / map.beam_cell_size_m): core keeps a few tables of that length per
 // sensor, so the count is bounded (2 km at the default 2 mm cells).
 constexpr double kMaxCellsPerBeam = 1e6;
 
-bool ValidateBeamLengths(const fusion::v1::ServiceConfig& config, std::string* error) {
+Status ValidateBeamLengths(const fusion::v1::ServiceConfig& config) {
   const double cell_m = config.map().beam_cell_size_m();
   for (int i = 0; i < config.sensors_size(); ++i) {
-    std::string detail;
-    const auto setup = SensorSetupFromConfig(config.sensors(i), &detail);
-    if (!setup) continue;  // reported by ValidateSensors
+    const auto setup = SensorSetupFromConfig(config.sensors(i));
+    if (!setup.ok()) continue;  // reported by ValidateSensors
     const double cells = setup->spec.r_max_m / cell_m;
     if (!(cells <= kMaxCellsPerBeam)) {
       std::ostringstream message;
       message << setup->spec.r_max_m << " m in beam cells of " << cell_m
               << " m (map.beam_cell_size_m) is " << cells
               << " cells, more than 1000000: lower r_max_m or raise map.beam_cell_size_m";
-      return Fail(error, "sensors[" + std::to_string(i) + "].r_max_m", message.str());
+      return Fail("sensors[" + std::to_string(i) + "].r_max_m", message.str());
     }
   }
-  return true;
+  return Status::Ok();
 }
 
-bool ValidateIngest(const fusion::v1::IngestConfig& ingest, std::string* error) {
+Status ValidateIngest(const fusion::v1::IngestConfig& ingest) {
   if (ingest.reliability() != "best_effort" && ingest.reliability() != "reliable") {
-    return Fail(error, "ingest.reliability",
+    return Fail("ingest.reliability",
                 "'" + ingest.reliability() + "' is not best_effort or reliable");
   }
   if (ingest.max_points() == 0 || ingest.max_points() > 50'000'000) {
-    return Fail(error, "ingest.max_points", "must lie in 1..50000000");
+    return Fail("ingest.max_points", "must lie in 1..50000000");
   }
   if (!(ingest.quaternion_tolerance() > 0.0 && ingest.quaternion_tolerance() < 0.5)) {
-    return Fail(error, "ingest.quaternion_tolerance", "must lie in (0, 0.5)");
+    return Fail("ingest.quaternion_tolerance", "must lie in (0, 0.5)");
   }
   if (!(ingest.max_abs_translation_m() > 0.0 && std::isfinite(ingest.max_abs_translation_m()))) {
-    return Fail(error, "ingest.max_abs_translation_m", "must be positive and finite");
+    return Fail("ingest.max_abs_translation_m", "must be positive and finite");
   }
   if (ingest.max_queued_mb() < 16 || ingest.max_queued_mb() > 65536) {
-    return Fail(error, "ingest.max_queued_mb", "must lie in 16..65536");
+    return Fail("ingest.max_queued_mb", "must lie in 16..65536");
   }
-  return true;
+  return Status::Ok();
 }
 
-bool ValidateLimits(const fusion::v1::QueryLimits& limits, std::string* error) {
+Status ValidateLimits(const fusion::v1::QueryLimits& limits) {
   if (limits.max_points_per_query() == 0) {
-    return Fail(error, "limits.max_points_per_query", "must be positive");
+    return Fail("limits.max_points_per_query", "must be positive");
   }
   // A page of voxels is one gRPC message: 50000 voxels (~55 bytes each) stay under the 4 MB
   // that gRPC clients accept by default.
   if (limits.max_voxels_per_page() == 0 || limits.max_voxels_per_page() > 50'000) {
-    return Fail(error, "limits.max_voxels_per_page",
+    return Fail("limits.max_voxels_per_page",
                 "must lie in 1..50000 (a page is one gRPC message, at most 4 MB)");
   }
-  if (limits.max_box_voxels() == 0) return Fail(error, "limits.max_box_voxels", "must be positive");
+  if (limits.max_box_voxels() == 0) return Fail("limits.max_box_voxels", "must be positive");
   if (limits.max_update_streams() == 0 || limits.max_update_streams() > 10'000) {
-    return Fail(error, "limits.max_update_streams", "must lie in 1..10000");
+    return Fail("limits.max_update_streams", "must lie in 1..10000");
   }
   if (limits.max_plane_cells() < 100'000 || limits.max_plane_cells() > 10'000'000'000ull) {
-    return Fail(error, "limits.max_plane_cells", "must lie in 100000..10000000000");
+    return Fail("limits.max_plane_cells", "must lie in 100000..10000000000");
   }
   if (limits.max_heavy_queries() == 0 || limits.max_heavy_queries() > 64) {
-    return Fail(error, "limits.max_heavy_queries", "must lie in 1..64");
+    return Fail("limits.max_heavy_queries", "must lie in 1..64");
   }
   if (limits.heavy_query_nice() < 11 || limits.heavy_query_nice() > 19) {
-    return Fail(error, "limits.heavy_query_nice",
+    return Fail("limits.heavy_query_nice",
                 "must lie in 11..19 (above the fusion worker's nice value, 10)");
   }
   if (limits.snapshot_chunk_bytes() < 1024 || limits.snapshot_chunk_bytes() > (3u << 20)) {
-    return Fail(error, "limits.snapshot_chunk_bytes",
+    return Fail("limits.snapshot_chunk_bytes",
                 "must lie in 1024..3145728 (gRPC's default message limit is 4 MiB)");
   }
-  return true;
+  return Status::Ok();
 }
 
 // fusiond's deployed map defaults, where they differ from core's on purpose. The one place for
@@ -199,12 +193,10 @@ fusion::v1::ServiceConfig DefaultConfig() {
   return config;
 }
 
-bool LoadConfigFile(const std::string& path, fusion::v1::ServiceConfig* config,
-                    std::string* error) {
+Status LoadConfigFile(const std::string& path, fusion::v1::ServiceConfig* config) {
   std::ifstream in(path);
   if (!in) {
-    *error = "cannot open configuration file '" + path + "'";
-    return false;
+    return Status::Error("cannot open configuration file '" + path + "'");
   }
   std::stringstream buffer;
   buffer << in.rdbuf();
@@ -212,65 +204,60 @@ bool LoadConfigFile(const std::string& path, fusion::v1::ServiceConfig* config,
   if (EndsWith(path, ".json")) {
     const auto status = google::protobuf::util::JsonStringToMessage(buffer.str(), &loaded);
     if (!status.ok()) {
-      *error = path + ": " + std::string(status.message());
-      return false;
+      return Status::Error(path + ": " + std::string(status.message()));
     }
   } else {
     google::protobuf::TextFormat::Parser parser;
     ErrorCollector collector;
     parser.RecordErrorsTo(&collector);
     if (!parser.ParseFromString(buffer.str(), &loaded)) {
-      *error = path + ": " + collector.text();
-      return false;
+      return Status::Error(path + ": " + collector.text());
     }
   }
   config->MergeFrom(loaded);
-  return ValidateConfig(*config, error);
+  return ValidateConfig(*config);
 }
 
-bool ValidateConfig(const fusion::v1::ServiceConfig& config, std::string* error) {
+Status ValidateConfig(const fusion::v1::ServiceConfig& config) {
   if (config.listen_address().find(':') == std::string::npos) {
-    *error = "listen_address: '" + config.listen_address() + "' is not host:port";
-    return false;
+    return Status::Error("listen_address: '" + config.listen_address() + "' is not host:port");
   }
   // Cyclone DDS domain ids are 0..230 (the port mapping runs out above that).
   if (config.dds_domain() > 230) {
-    *error = "dds_domain: " + std::to_string(config.dds_domain()) + " is outside 0..230";
-    return false;
+    return Status::Error("dds_domain: " + std::to_string(config.dds_domain()) + " is outside 0..230");
   }
   if (config.dds_topic().empty()) {
-    *error = "dds_topic: must not be empty";
-    return false;
+    return Status::Error("dds_topic: must not be empty");
   }
   static const char* const kLevels[] = {"trace", "debug",    "info", "warn",
                                         "error", "critical", "off"};
   bool level_ok = false;
   for (const char* level : kLevels) level_ok = level_ok || config.log_level() == level;
   if (!level_ok) {
-    *error = "log_level: '" + config.log_level() +
-             "' is not one of trace, debug, info, warn, error, critical, off";
-    return false;
+    return Status::Error("log_level: '" + config.log_level() +
+             "' is not one of trace, debug, info, warn, error, critical, off");
   }
   if (!config.log_format().empty() && config.log_format() != "text" &&
       config.log_format() != "json") {
-    *error = "log_format: '" + config.log_format() + "' is not text or json";
-    return false;
+    return Status::Error("log_format: '" + config.log_format() + "' is not text or json");
   }
-  return ValidateSensors(config, error) && ValidateMap(config.map(), error) &&
-         ValidateBeamLengths(config, error) && ValidateIngest(config.ingest(), error) &&
-         ValidateLimits(config.limits(), error) && ValidateSecurity(config.security(), error);
+  for (const Status& part :
+       {ValidateSensors(config), ValidateMap(config.map()), ValidateBeamLengths(config),
+        ValidateIngest(config.ingest()), ValidateLimits(config.limits()),
+        ValidateSecurity(config.security())}) {
+    if (!part.ok()) return part;
+  }
+  return Status::Ok();
 }
 
-bool ParseSensorFlag(const std::string& value, fusion::v1::SensorConfig* sensor,
-                     std::string* error) {
+Status ParseSensorFlag(const std::string& value, fusion::v1::SensorConfig* sensor) {
   const auto eq = value.find('=');
   if (eq == std::string::npos || eq == 0 || eq + 1 == value.size()) {
-    *error = "--sensor: '" + value + "' is not ID=PRESET";
-    return false;
+    return Status::Error("--sensor: '" + value + "' is not ID=PRESET");
   }
   sensor->set_id(value.substr(0, eq));
   sensor->set_preset(value.substr(eq + 1));
-  return true;
+  return Status::Ok();
 }
 
 }  // namespace fusion::service

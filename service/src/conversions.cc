@@ -53,102 +53,106 @@ Eigen::Isometry3d IsometryFromConfig(const fusion::v1::Transform& t) {
   return T;
 }
 
-std::optional<SensorSetup> SensorSetupFromConfig(const fusion::v1::SensorConfig& c,
-                                                 std::string* error) {
-  SensorSetup setup;
-  setup.id = c.id();
-  setup.preset = c.preset();
-  if (c.id().empty()) {
-    *error = "id: must not be empty";
-    return std::nullopt;
-  }
+namespace {
+
+// The sensor's geometry and noise: a preset's, or every field given.
+StatusOr<SensorSpec> BaseSpecFromConfig(const fusion::v1::SensorConfig& c) {
   if (!c.preset().empty()) {
     auto preset = SensorPreset(c.preset());
     if (!preset) {
-      *error = "preset: '" + c.preset() + "' is not a known preset (sr3000, stoc)";
-      return std::nullopt;
+      return Status::Error("preset: '" + c.preset() + "' is not a known preset (sr3000, stoc)");
     }
-    setup.spec = *preset;
-  } else {
-    // Without a preset every geometric field must be given.
-    const char* missing = !c.has_r_min_m()     ? "r_min_m"
-                          : !c.has_r_max_m()   ? "r_max_m"
-                          : !c.has_fov_h_deg() ? "fov_h_deg"
-                          : !c.has_fov_v_deg() ? "fov_v_deg"
-                          : !c.has_cols()      ? "cols"
-                          : !c.has_rows()      ? "rows"
-                          : !c.has_q_mu()      ? "q_mu"
-                          : !c.has_q_sigma()   ? "q_sigma"
-                                               : nullptr;
-    if (missing != nullptr) {
-      *error = std::string(missing) + ": required when no preset is given";
-      return std::nullopt;
-    }
+    return *preset;
   }
-  SensorSpec& spec = setup.spec;
-  if (spec.name.empty()) spec.name = c.id();
+  const char* missing = !c.has_r_min_m()     ? "r_min_m"
+                        : !c.has_r_max_m()   ? "r_max_m"
+                        : !c.has_fov_h_deg() ? "fov_h_deg"
+                        : !c.has_fov_v_deg() ? "fov_v_deg"
+                        : !c.has_cols()      ? "cols"
+                        : !c.has_rows()      ? "rows"
+                        : !c.has_q_mu()      ? "q_mu"
+                        : !c.has_q_sigma()   ? "q_sigma"
+                                             : nullptr;
+  if (missing != nullptr) return Status::Error(std::string(missing) + ": required when no preset is given");
+  return SensorSpec{};
+}
+
+// The fields the file sets over the base spec, then core's checks, named as the file's fields.
+Status ApplySpecFields(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
+  if (spec->name.empty()) spec->name = c.id();
   if (c.model() == "classic_beam") {
-    spec.model = ForwardModelKind::kClassicBeam;
+    spec->model = ForwardModelKind::kClassicBeam;
   } else if (c.model() == "paper3d") {
-    spec.model = ForwardModelKind::kPaper3d;
+    spec->model = ForwardModelKind::kPaper3d;
   } else if (!c.model().empty()) {
-    *error = "model: '" + c.model() + "' is not paper3d or classic_beam";
-    return std::nullopt;
+    return Status::Error("model: '" + c.model() + "' is not paper3d or classic_beam");
   }
-  if (c.has_r_min_m()) spec.r_min_m = c.r_min_m();
-  if (c.has_r_max_m()) spec.r_max_m = c.r_max_m();
-  if (c.has_fov_h_deg()) spec.fov_h_rad = c.fov_h_deg() * kDegToRad;
-  if (c.has_fov_v_deg()) spec.fov_v_rad = c.fov_v_deg() * kDegToRad;
-  if (c.has_cols()) spec.cols = static_cast<int>(std::min<std::uint32_t>(c.cols(), 1u << 30));
-  if (c.has_rows()) spec.rows = static_cast<int>(std::min<std::uint32_t>(c.rows(), 1u << 30));
-  if (c.has_q_mu()) spec.q_mu = PolynomialFromConfig(c.q_mu());
-  if (c.has_q_sigma()) spec.q_sigma = PolynomialFromConfig(c.q_sigma());
-  if (c.has_epsilon()) spec.epsilon = c.epsilon();
-  if (static_cast<long long>(spec.cols) * spec.rows > 4'000'000) {
-    *error =
-        "cols: cols * rows = " + std::to_string(static_cast<long long>(spec.cols) * spec.rows) +
-        " beams is more than 4000000";
-    return std::nullopt;
+  if (c.has_r_min_m()) spec->r_min_m = c.r_min_m();
+  if (c.has_r_max_m()) spec->r_max_m = c.r_max_m();
+  if (c.has_fov_h_deg()) spec->fov_h_rad = c.fov_h_deg() * kDegToRad;
+  if (c.has_fov_v_deg()) spec->fov_v_rad = c.fov_v_deg() * kDegToRad;
+  if (c.has_cols()) spec->cols = static_cast<int>(std::min<std::uint32_t>(c.cols(), 1u << 30));
+  if (c.has_rows()) spec->rows = static_cast<int>(std::min<std::uint32_t>(c.rows(), 1u << 30));
+  if (c.has_q_mu()) spec->q_mu = PolynomialFromConfig(c.q_mu());
+  if (c.has_q_sigma()) spec->q_sigma = PolynomialFromConfig(c.q_sigma());
+  if (c.has_epsilon()) spec->epsilon = c.epsilon();
+  const long long beams = static_cast<long long>(spec->cols) * spec->rows;
+  if (beams > 4'000'000) {
+    return Status::Error("cols: cols * rows = " + std::to_string(beams) +
+                         " beams is more than 4000000");
   }
-  const std::string spec_error = ValidateSensorSpec(spec);
-  if (!spec_error.empty()) {
-    // Name the configuration field, not core's: degrees in the file, radians in core.
-    std::string field = spec_error.substr(0, spec_error.find(' '));
-    if (field == "fov_h_rad") field = "fov_h_deg";
-    if (field == "fov_v_rad") field = "fov_v_deg";
-    *error = field + ": " + spec_error;
-    return std::nullopt;
-  }
+  const std::string spec_error = ValidateSensorSpec(*spec);
+  if (spec_error.empty()) return Status::Ok();
+  // Name the configuration field, not core's: degrees in the file, radians in core.
+  std::string field = spec_error.substr(0, spec_error.find(' '));
+  if (field == "fov_h_rad") field = "fov_h_deg";
+  if (field == "fov_v_rad") field = "fov_v_deg";
+  return Status::Error(field + ": " + spec_error);
+}
+
+// The mount and the queue: what the service adds to core's spec.
+Status ApplyServiceFields(const fusion::v1::SensorConfig& c, SensorSetup* setup) {
   if (c.has_mount()) {
     const auto& m = c.mount();
     const Eigen::Vector4d q(m.qx(), m.qy(), m.qz(), m.qw());
     if (!Finite(Eigen::Vector3d(m.tx(), m.ty(), m.tz())) || !q.allFinite() ||
         (!q.isZero() && std::abs(q.norm() - 1.0) > 1e-3)) {
-      *error = "mount: translation must be finite and the quaternion unit (or all zero)";
-      return std::nullopt;
+      return Status::Error("mount: translation must be finite and the quaternion unit (or all zero)");
     }
-    setup.T_published_sensor = IsometryFromConfig(m);
+    setup->T_published_sensor = IsometryFromConfig(m);
   }
   if (c.has_queue_depth()) {
     if (c.queue_depth() < 1 || c.queue_depth() > 1000) {
-      *error = "queue_depth: " + std::to_string(c.queue_depth()) + " is outside 1..1000";
-      return std::nullopt;
+      return Status::Error("queue_depth: " + std::to_string(c.queue_depth()) + " is outside 1..1000");
     }
-    setup.queue_depth = c.queue_depth();
+    setup->queue_depth = c.queue_depth();
   }
+  return Status::Ok();
+}
+
+}  // namespace
+
+StatusOr<SensorSetup> SensorSetupFromConfig(const fusion::v1::SensorConfig& c) {
+  if (c.id().empty()) return Status::Error("id: must not be empty");
+  auto spec = BaseSpecFromConfig(c);
+  if (!spec.ok()) return spec.status();
+  SensorSetup setup;
+  setup.id = c.id();
+  setup.preset = c.preset();
+  setup.spec = std::move(*spec);
+  if (Status s = ApplySpecFields(c, &setup.spec); !s.ok()) return s;
+  if (Status s = ApplyServiceFields(c, &setup); !s.ok()) return s;
   return setup;
 }
 
-std::optional<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig& c,
-                                                         std::string* error) {
+StatusOr<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig& c) {
   WorldMapOptions options;
   options.resolution_m = c.resolution_m();
   const auto rule = FusionRuleFromName(c.fusion_rule());
   if (!rule) {
     std::string names;
     for (const auto& n : FusionRuleNames()) names += (names.empty() ? "" : ", ") + n;
-    *error = "fusion_rule: '" + c.fusion_rule() + "' is not one of " + names;
-    return std::nullopt;
+    return Status::Error("fusion_rule: '" + c.fusion_rule() + "' is not one of " + names);
   }
   options.rule = *rule;
   options.pose_tolerance_m = c.pose_tolerance_m();
@@ -167,10 +171,7 @@ std::optional<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapCo
                                : std::max(1u, std::thread::hardware_concurrency() - 1);
   // Core checks its options (one place); the message names the configuration's field.
   std::string why;
-  if (!options.IsValid(&why)) {
-    *error = MapConfigError(why);
-    return std::nullopt;
-  }
+  if (!options.IsValid(&why)) return Status::Error(MapConfigError(why));
   return options;
 }
 

@@ -30,17 +30,15 @@ DdsIngest::DdsIngest(IngestQueues* queues, DdsIngestOptions options)
 
 DdsIngest::~DdsIngest() { Stop(); }
 
-bool DdsIngest::Start(dds_entity_t participant, std::string* error) {
+Status DdsIngest::Start(dds_entity_t participant) {
   topic_ = dds_create_topic(participant, &fusion_dds_PointCloud_desc, options_.topic.c_str(),
                             nullptr, nullptr);
   if (topic_ < 0) {
-    *error = DdsError("dds_create_topic", topic_);
-    return false;
+    return Status::Error(DdsError("dds_create_topic", topic_));
   }
   if (const dds_return_t rc = dds_set_topic_filter_and_arg(topic_, &DdsIngest::AcceptSensor, this);
       rc != DDS_RETCODE_OK) {
-    *error = DdsError("dds_set_topic_filter_and_arg", rc);
-    return false;
+    return Status::Error(DdsError("dds_set_topic_filter_and_arg", rc));
   }
   dds_qos_t* qos = dds_create_qos();
   if (options_.reliable) {
@@ -63,8 +61,7 @@ bool DdsIngest::Start(dds_entity_t participant, std::string* error) {
   reader_ = dds_create_reader(participant, topic_, qos, nullptr);
   dds_delete_qos(qos);
   if (reader_ < 0) {
-    *error = DdsError("dds_create_reader", reader_);
-    return false;
+    return Status::Error(DdsError("dds_create_reader", reader_));
   }
   waitset_ = dds_create_waitset(participant);
   read_condition_ = dds_create_readcondition(reader_, DDS_ANY_STATE);
@@ -73,18 +70,16 @@ bool DdsIngest::Start(dds_entity_t participant, std::string* error) {
                                      std::pair{read_condition_, "dds_create_readcondition"},
                                      std::pair{stop_condition_, "dds_create_guardcondition"}}) {
     if (entity < 0) {
-      *error = DdsError(name, entity);
-      return false;
+      return Status::Error(DdsError(name, entity));
     }
   }
   dds_return_t rc = dds_waitset_attach(waitset_, read_condition_, 0);
   if (rc == DDS_RETCODE_OK) rc = dds_waitset_attach(waitset_, stop_condition_, 1);
   if (rc != DDS_RETCODE_OK) {
-    *error = DdsError("dds_waitset_attach", rc);
-    return false;
+    return Status::Error(DdsError("dds_waitset_attach", rc));
   }
   thread_ = std::thread([this] { Loop(); });
-  return true;
+  return Status::Ok();
 }
 
 void DdsIngest::Stop() {

@@ -52,13 +52,12 @@ FusionWorker::FusionWorker(WorkerOptions options, std::vector<SensorSetup> senso
 
 FusionWorker::~FusionWorker() { Stop(); }
 
-bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> history, std::string* error) {
+Status FusionWorker::Start(std::unique_ptr<octomap::OcTree> history) {
   std::lock_guard<std::mutex> lock(map_mutex_);
   try {
-    if (!StartLocked(std::move(history), error)) return false;
+    if (Status started = StartLocked(std::move(history)); !started.ok()) return started;
   } catch (const std::exception& e) {  // core refuses what validation let through
-    *error = std::string("the map could not be set up: ") + e.what();
-    return false;
+    return Status::Error(std::string("the map could not be set up: ") + e.what());
   }
   // spdlog's registry is a function-local static of an uninstrumented library: create it here,
   // before the threads that log, so its construction happens before their first use (what the
@@ -66,18 +65,17 @@ bool FusionWorker::Start(std::unique_ptr<octomap::OcTree> history, std::string* 
   (void)spdlog::default_logger_raw();
   integrator_ = std::thread([this] { IntegratorLoop(); });
   renderer_ = std::thread([this] { RendererLoop(); });
-  return true;
+  return Status::Ok();
 }
 
-bool FusionWorker::StartLocked(std::unique_ptr<octomap::OcTree> history, std::string* error) {
+Status FusionWorker::StartLocked(std::unique_ptr<octomap::OcTree> history) {
   WorldMapOptions map_options = options_.map;
   map_options.occupancy_threshold = options_.thresholds.occupied;
   map_ = std::make_unique<WorldMap>(map_options);
   for (const auto& sensor : sensors_) {
     const MapStatus status = map_->AddSensor(sensor.id, sensor.spec);
     if (status != MapStatus::kOk) {
-      *error = "sensor '" + sensor.id + "': " + MapStatusName(status);
-      return false;
+      return Status::Error("sensor '" + sensor.id + "': " + MapStatusName(status));
     }
     auto lane = std::make_unique<Lane>();
     lane->setup = &sensor;
@@ -90,7 +88,7 @@ bool FusionWorker::StartLocked(std::unique_ptr<octomap::OcTree> history, std::st
   }
   if (history) map_->LoadHistory(*history);
   PublishLocked();
-  return true;
+  return Status::Ok();
 }
 
 void FusionWorker::Stop() {

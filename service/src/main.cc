@@ -68,7 +68,6 @@ bool ParseUnsigned(const char* text, unsigned long* value) {
 // The flags over the configuration; -1 to go on, else the exit code (--help: 0, bad: 2).
 int ApplyFlags(int argc, char** argv, fusion::v1::ServiceConfig* config_out) {
   auto& config = *config_out;
-  std::string error;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     const bool has_value = i + 1 < argc;
@@ -92,9 +91,8 @@ int ApplyFlags(int argc, char** argv, fusion::v1::ServiceConfig* config_out) {
     } else if (arg == "--log-format" && has_value) {
       config.set_log_format(argv[++i]);
     } else if (arg == "--sensor" && has_value) {
-      if (!fusion::service::ParseSensorFlag(argv[++i], config.add_sensors(), &error)) {
-        return Fail(error);
-      }
+      const fusion::Status parsed = fusion::service::ParseSensorFlag(argv[++i], config.add_sensors());
+      if (!parsed.ok()) return Fail(parsed.message());
     } else if (arg == "--resolution" && has_value) {
       double resolution = 0.0;
       if (!ParseDouble(argv[++i], &resolution)) return Fail("--resolution: not a number");
@@ -134,16 +132,16 @@ int main(int argc, char** argv) {
   // threshold after the first free and keep freed clouds in its arenas).
   mallopt(M_MMAP_THRESHOLD, 1 << 20);
   auto config = fusion::service::DefaultConfig();
-  std::string error;
   // The config file first, so flags override it wherever they stand.
   for (int i = 1; i + 1 < argc; ++i) {
-    if (std::string(argv[i]) == "--config" &&
-        !fusion::service::LoadConfigFile(argv[i + 1], &config, &error)) {
-      return Fail(error);
-    }
+    if (std::string(argv[i]) != "--config") continue;
+    const fusion::Status loaded = fusion::service::LoadConfigFile(argv[i + 1], &config);
+    if (!loaded.ok()) return Fail(loaded.message());
   }
   if (const int exit_code = ApplyFlags(argc, argv, &config); exit_code >= 0) return exit_code;
-  if (!fusion::service::ValidateConfig(config, &error)) return Fail(error);
+  if (const fusion::Status valid = fusion::service::ValidateConfig(config); !valid.ok()) {
+    return Fail(valid.message());
+  }
   // Logs go to stderr: stdout carries only the "listening on" line a parent may read.
   fusion::service::SetUpLogging(config.log_format(), config.log_level());
 
@@ -155,7 +153,7 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
 
   fusion::service::FusionServer server(config);
-  if (!server.Start(&error)) return Fail(error);
+  if (const fusion::Status started = server.Start(); !started.ok()) return Fail(started.message());
   const std::string host = config.listen_address().substr(0, config.listen_address().rfind(':'));
   std::printf("fusiond listening on %s:%d\n", host.c_str(), server.port());
   std::fflush(stdout);
@@ -165,8 +163,8 @@ int main(int argc, char** argv) {
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
   spdlog::info("signal {} received, shutting down", signal_number);
-  if (!server.Shutdown()) {
-    spdlog::error("stopped without its final snapshot");
+  if (const fusion::Status stopped = server.Shutdown(); !stopped.ok()) {
+    spdlog::error("stopped without its final snapshot: {}", stopped.message());
     return 1;
   }
   spdlog::info("stopped");

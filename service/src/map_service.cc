@@ -167,6 +167,10 @@ grpc::ServerUnaryReactor* MapService::FindPlanes(grpc::CallbackServerContext* co
     auto options = HoughOptionsFromProto(*request, snapshot->tree->getResolution());
     options.max_accumulator_cells = state_->config.limits().max_plane_cells();
     options.stop = [this, context] { return Stopped(context, state_); };
+    // CheckFindPlanes keeps requests within core's bounds; this says which one if not.
+    if (std::string why; !options.IsValid(&why)) {
+      return Status(StatusCode::INVALID_ARGUMENT, "FindPlanes: " + why);
+    }
     const PlaneSearch search = SearchPlanes(*snapshot->tree, options);
     if (search.status == PlaneSearchStatus::kTooLarge) {
       return Status(StatusCode::RESOURCE_EXHAUSTED,
@@ -265,9 +269,8 @@ grpc::ServerUnaryReactor* MapService::SaveMap(grpc::CallbackServerContext* conte
                     "no persistence.path configured (set it or pass --snapshot)");
     }
     std::uint64_t version = 0, bytes = 0;
-    std::string error;
-    if (!state_->persister->SaveNow(&version, &bytes, &error)) {
-      return Status(StatusCode::INTERNAL, "snapshot not written: " + error);
+    if (const fusion::Status saved = state_->persister->SaveNow(&version, &bytes); !saved.ok()) {
+      return Status(StatusCode::INTERNAL, "snapshot not written: " + saved.message());
     }
     reply->set_path(state_->persister->path());
     reply->set_bytes(bytes);

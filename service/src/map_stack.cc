@@ -16,68 +16,59 @@ MapStack::~MapStack() {
   (void)Finish();
 }
 
-bool MapStack::ConvertConfig(std::string* error) {
+Status MapStack::ConvertConfig() {
   state_.config = config_;
   std::vector<std::pair<std::string, std::size_t>> queue_specs;
   for (int i = 0; i < config_.sensors_size(); ++i) {
-    std::string detail;
-    auto setup = SensorSetupFromConfig(config_.sensors(i), &detail);
-    if (!setup) {
-      *error = "sensors[" + std::to_string(i) + "]." + detail;
-      return false;
-    }
+    auto setup = SensorSetupFromConfig(config_.sensors(i));
+    if (!setup.ok()) return setup.status().WithContext("sensors[" + std::to_string(i) + "]");
     queue_specs.emplace_back(setup->id, setup->queue_depth);
     state_.sensors.push_back(std::move(*setup));
   }
-  std::string detail;
-  const auto map_options = WorldMapOptionsFromConfig(config_.map(), &detail);
-  if (!map_options) {
-    *error = "map." + detail;
-    return false;
-  }
+  const auto map_options = WorldMapOptionsFromConfig(config_.map());
+  if (!map_options.ok()) return map_options.status().WithContext("map");
   map_options_ = *map_options;
   state_.thresholds = ThresholdsFromConfig(config_.map());
   queues_ = std::make_unique<IngestQueues>(
       queue_specs, std::size_t{config_.ingest().max_queued_mb()} << 20);
   state_.queues = queues_.get();
-  return true;
+  return Status::Ok();
 }
 
 // The last snapshot, if any: loaded into *base, or set aside when corrupt.
-bool MapStack::LoadLastSnapshot(std::unique_ptr<octomap::OcTree>* base, std::string* error) {
+Status MapStack::LoadLastSnapshot(std::unique_ptr<octomap::OcTree>* base) {
   const auto& persistence = config_.persistence();
-  if (persistence.path().empty()) return true;
+  if (persistence.path().empty()) return Status::Ok();
   for (const std::string& stale : RemoveStaleTempFiles(persistence.path())) {
     spdlog::warn("snapshot: removed {}, left by a write that was killed", stale);
   }
-  if (persistence.has_load_on_start() && !persistence.load_on_start()) return true;
+  if (persistence.has_load_on_start() && !persistence.load_on_start()) return Status::Ok();
   std::string message;
   switch (LoadSnapshotFile(persistence.path(), map_options_.resolution_m, base, &message)) {
     case LoadStatus::kLoaded:
       spdlog::info("snapshot: loaded {} ({} nodes)", persistence.path(), (*base)->size());
-      return true;
+      return Status::Ok();
     case LoadStatus::kMissing:
       spdlog::info("snapshot: {} does not exist yet; starting with an empty map",
                    persistence.path());
-      return true;
+      return Status::Ok();
     case LoadStatus::kCorrupt:
       spdlog::error("snapshot: corrupt, not loaded: {}; starting with an empty map", message);
-      return true;
+      return Status::Ok();
     case LoadStatus::kError:
       break;
   }
-  *error = "snapshot: " + message;
-  return false;
+  return Status::Error("snapshot: " + message);
 }
 
-bool MapStack::Start(std::string* error) {
-  if (!ConvertConfig(error)) return false;
+Status MapStack::Start() {
+  if (Status converted = ConvertConfig(); !converted.ok()) return converted;
   // Queries before the first render see an empty map at the configured resolution.
   hub_ = std::make_unique<SnapshotHub>(SnapshotHub::kDefaultMaxLoggedRegions,
                                        config_.map().resolution_m());
   state_.hub = hub_.get();
   std::unique_ptr<octomap::OcTree> base;
-  if (!LoadLastSnapshot(&base, error)) return false;
+  if (Status loaded = LoadLastSnapshot(&base); !loaded.ok()) return loaded;
 
   WorkerOptions worker_options;
   worker_options.map = map_options_;
@@ -87,7 +78,7 @@ bool MapStack::Start(std::string* error) {
   worker_ = std::make_unique<FusionWorker>(worker_options, state_.sensors, queues_.get(),
                                            hub_.get());
   const bool loaded = base != nullptr;
-  if (!worker_->Start(std::move(base), error)) return false;
+  if (Status started = worker_->Start(std::move(base)); !started.ok()) return started;
   state_.worker = worker_.get();
 
   const auto& persistence = config_.persistence();
@@ -98,10 +89,11 @@ bool MapStack::Start(std::string* error) {
   persister_->Start();
   state_.persister = persister_.get();
 
-  heavy_pool_ = std::make_unique<QueryPool>(config_.limits().max_heavy_queries(),
-                                            static_cast<int>(config_.limits().heavy_query_nice()));
+  heavy_pool_ = std::make_unique<QueryPool>(
+      config_.limits().max_heavy_queries(), static_cast<int>(config_.limits().heavy_query_nice()),
+      [this] { (void)heap_trimmer_.MaybeTrim(std::chrono::steady_clock::now()); });
   state_.heavy_pool = heavy_pool_.get();
-  return true;
+  return Status::Ok();
 }
 
 void MapStack::BeginShutdown() {
@@ -114,18 +106,17 @@ void MapStack::StopQueries() {
   state_.heavy_pool = nullptr;
 }
 
-bool MapStack::Finish() {
-  if (finished_) return true;
+Status MapStack::Finish() {
+  if (finished_) return Status::Ok();
   finished_ = true;
   if (worker_) worker_->Stop();  // drains the queues, renders, publishes
-  if (!persister_) return true;
+  if (!persister_) return Status::Ok();
   persister_->Stop();
-  if (!persister_->enabled()) return true;
+  if (!persister_->enabled()) return Status::Ok();
   std::uint64_t version = 0, bytes = 0;
-  std::string error;
-  if (persister_->SaveNow(&version, &bytes, &error)) return true;
-  spdlog::error("final snapshot not written: {}", error);
-  return false;
+  const Status saved = persister_->SaveNow(&version, &bytes);
+  if (!saved.ok()) spdlog::error("final snapshot not written: {}", saved.message());
+  return saved.WithContext("final snapshot");
 }
 
 }  // namespace fusion::service

@@ -139,29 +139,26 @@ std::string SerializeBt(const octomap::OcTree& tree) {
   return out.str();
 }
 
-bool WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path, std::uint64_t* bytes,
-                       std::string* error) {
+Status WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path,
+                         std::uint64_t* bytes) {
   const std::string data = SerializeOt(tree);
   const std::string temp = path + ".tmp-" + std::to_string(::getpid());
   const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) {
-    *error = Errno("open " + temp);
-    return false;
-  }
+  if (fd < 0) return Status::Error(Errno("open " + temp));
   const bool written = WriteAll(fd, data);
   const bool synced = written && ::fsync(fd) == 0;
   const int saved_errno = errno;
   ::close(fd);
   if (!written || !synced) {
     errno = saved_errno;
-    *error = Errno(std::string(written ? "fsync " : "write ") + temp);
+    const Status failed = Status::Error(Errno(std::string(written ? "fsync " : "write ") + temp));
     ::unlink(temp.c_str());
-    return false;
+    return failed;
   }
   if (::rename(temp.c_str(), path.c_str()) != 0) {
-    *error = Errno("rename " + temp + " -> " + path);
+    const Status failed = Status::Error(Errno("rename " + temp + " -> " + path));
     ::unlink(temp.c_str());
-    return false;
+    return failed;
   }
   // The rename itself must reach the disk too.
   const int dir = ::open(DirectoryOf(path).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
@@ -170,7 +167,7 @@ bool WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path, std
     ::close(dir);
   }
   if (bytes != nullptr) *bytes = data.size();
-  return true;
+  return Status::Ok();
 }
 
 std::vector<std::string> RemoveStaleTempFiles(const std::string& path) {

@@ -29,23 +29,20 @@ void Persister::set_saved_version(std::uint64_t version) {
   saved_version_ = version;
 }
 
-bool Persister::SaveNow(std::uint64_t* version, std::uint64_t* bytes, std::string* error) {
-  if (!enabled()) {
-    *error = "no persistence.path configured";
-    return false;
-  }
+Status Persister::SaveNow(std::uint64_t* version, std::uint64_t* bytes) {
+  if (!enabled()) return Status::Error("no persistence.path configured");
   std::lock_guard<std::mutex> lock(write_mutex_);
   const auto snapshot = hub_->Current();
   const auto start = std::chrono::steady_clock::now();
-  if (!WriteSnapshotFile(*snapshot->tree, path_, bytes, error)) {
-    spdlog::error("snapshot: {}", *error);
+  if (Status written = WriteSnapshotFile(*snapshot->tree, path_, bytes); !written.ok()) {
+    spdlog::error("snapshot: {}", written.message());
     failures_.fetch_add(1);
     {
       std::lock_guard<std::mutex> error_lock(error_mutex_);
-      last_error_ = *error;
+      last_error_ = written.message();
     }
     if (!failing_.exchange(true) && on_health_) on_health_(false);
-    return false;
+    return written;
   }
   if (failing_.exchange(false)) {
     spdlog::info("snapshot: writes succeed again");
@@ -57,7 +54,7 @@ bool Persister::SaveNow(std::uint64_t* version, std::uint64_t* bytes, std::strin
   spdlog::info(
       "snapshot: version {} written to {} ({} bytes, {:.1f} ms)", snapshot->version, path_, *bytes,
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
-  return true;
+  return Status::Ok();
 }
 
 std::string Persister::last_error() const {
@@ -76,8 +73,7 @@ void Persister::Loop() {
     }
     if (changed) {
       std::uint64_t version = 0, bytes = 0;
-      std::string error;
-      (void)SaveNow(&version, &bytes, &error);  // logs its own errors and counts them
+      (void)SaveNow(&version, &bytes);  // logs its own errors and counts them
     }
     lock.lock();
   }

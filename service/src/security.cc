@@ -21,21 +21,18 @@ bool ConstantTimeEqual(const std::string& a, const std::string& b) {
   return diff == 0;
 }
 
-bool ReadFile(const std::string& path, std::string* text, std::string* error) {
+fusion::StatusOr<std::string> ReadFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::ostringstream buffer;
   if (in) buffer << in.rdbuf();
-  if (!in || in.bad()) {
-    *error = "cannot read '" + path + "'";
-    return false;
-  }
-  *text = buffer.str();
-  return true;
+  if (!in || in.bad()) return fusion::Status::Error("cannot read '" + path + "'");
+  return buffer.str();
 }
 
 }  // namespace
 
-bool ParseTokens(const std::string& text, std::vector<Token>* tokens, std::string* error) {
+fusion::StatusOr<std::vector<Token>> ParseTokens(const std::string& text) {
+  std::vector<Token> tokens;
   std::istringstream lines(text);
   std::string line;
   for (int number = 1; std::getline(lines, line); ++number) {
@@ -44,21 +41,15 @@ bool ParseTokens(const std::string& text, std::vector<Token>* tokens, std::strin
     std::istringstream fields(line);
     std::string role, secret, extra;
     if (!(fields >> role)) continue;  // blank
+    const std::string at = "line " + std::to_string(number) + ": ";
     if (!(fields >> secret) || (fields >> extra) || (role != "read" && role != "admin")) {
-      *error = "line " + std::to_string(number) + ": expected '<read|admin> <token>'";
-      return false;
+      return fusion::Status::Error(at + "expected '<read|admin> <token>'");
     }
-    if (secret.size() < 16) {
-      *error = "line " + std::to_string(number) + ": a token needs at least 16 characters";
-      return false;
-    }
-    tokens->push_back({role == "admin" ? Role::kAdmin : Role::kRead, secret});
+    if (secret.size() < 16) return fusion::Status::Error(at + "a token needs at least 16 characters");
+    tokens.push_back({role == "admin" ? Role::kAdmin : Role::kRead, secret});
   }
-  if (tokens->empty()) {
-    *error = "no token in the file";
-    return false;
-  }
-  return true;
+  if (tokens.empty()) return fusion::Status::Error("no token in the file");
+  return tokens;
 }
 
 Role RequiredRole(const std::string& method) {
@@ -101,10 +92,9 @@ Status TokenAuthProcessor::Process(const InputMetadata& auth_metadata, grpc::Aut
   return status;
 }
 
-bool ValidateSecurity(const fusion::v1::SecurityConfig& security, std::string* error) {
-  const auto fail = [error](const std::string& field, const std::string& why) {
-    *error = "security." + field + ": " + why;
-    return false;
+fusion::Status ValidateSecurity(const fusion::v1::SecurityConfig& security) {
+  const auto fail = [](const std::string& field, const std::string& why) {
+    return fusion::Status::Error("security." + field + ": " + why);
   };
   if (security.tls_cert_file().empty() != security.tls_key_file().empty()) {
     return fail(security.tls_cert_file().empty() ? "tls_cert_file" : "tls_key_file",
@@ -119,36 +109,34 @@ bool ValidateSecurity(const fusion::v1::SecurityConfig& security, std::string* e
                 "tokens need TLS (tls_cert_file, tls_key_file): gRPC sends them only over a "
                 "secure channel");
   }
-  return true;
+  return fusion::Status::Ok();
 }
 
-std::shared_ptr<grpc::ServerCredentials> ServerCredentialsFor(
-    const fusion::v1::SecurityConfig& security, std::string* error) {
+fusion::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(
+    const fusion::v1::SecurityConfig& security) {
   if (security.tls_cert_file().empty()) return grpc::InsecureServerCredentials();
   grpc::SslServerCredentialsOptions options(
       security.tls_client_ca_file().empty()
           ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
           : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
-  grpc::SslServerCredentialsOptions::PemKeyCertPair pair;
-  if (!ReadFile(security.tls_key_file(), &pair.private_key, error) ||
-      !ReadFile(security.tls_cert_file(), &pair.cert_chain, error)) {
-    return nullptr;
-  }
-  options.pem_key_cert_pairs.push_back(std::move(pair));
-  if (!security.tls_client_ca_file().empty() &&
-      !ReadFile(security.tls_client_ca_file(), &options.pem_root_certs, error)) {
-    return nullptr;
+  auto key = ReadFile(security.tls_key_file());
+  if (!key.ok()) return key.status();
+  auto cert = ReadFile(security.tls_cert_file());
+  if (!cert.ok()) return cert.status();
+  options.pem_key_cert_pairs.push_back({std::move(*key), std::move(*cert)});
+  if (!security.tls_client_ca_file().empty()) {
+    auto ca = ReadFile(security.tls_client_ca_file());
+    if (!ca.ok()) return ca.status();
+    options.pem_root_certs = std::move(*ca);
   }
   auto credentials = grpc::SslServerCredentials(options);
   if (!security.tokens_file().empty()) {
-    std::string text;
-    std::vector<Token> tokens;
-    if (!ReadFile(security.tokens_file(), &text, error)) return nullptr;
-    if (!ParseTokens(text, &tokens, error)) {
-      *error = security.tokens_file() + ": " + *error;
-      return nullptr;
-    }
-    credentials->SetAuthMetadataProcessor(std::make_shared<TokenAuthProcessor>(std::move(tokens)));
+    auto text = ReadFile(security.tokens_file());
+    if (!text.ok()) return text.status();
+    auto tokens = ParseTokens(*text);
+    if (!tokens.ok()) return tokens.status().WithContext(security.tokens_file());
+    credentials->SetAuthMetadataProcessor(
+        std::make_shared<TokenAuthProcessor>(std::move(*tokens)));
   }
   return credentials;
 }

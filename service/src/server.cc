@@ -23,15 +23,16 @@ FusionServer::FusionServer(fusion::v1::ServiceConfig config) : config_(std::move
 
 FusionServer::~FusionServer() { (void)Shutdown(); }
 
-bool FusionServer::Start(std::string* error) {
+Status FusionServer::Start() {
   parts_ = std::make_unique<Parts>();
   Parts& p = *parts_;
   p.stack = std::make_unique<MapStack>(
       config_, [this](bool ok) { SetHealth(kPersistenceHealth, ok); });
-  if (!p.stack->Start(error)) return false;
+  if (Status started = p.stack->Start(); !started.ok()) return started;
 
-  participant_ = fusion::dds::CreateParticipant(config_.dds_domain(), error);
-  if (participant_ < 0) return false;
+  std::string dds_error;
+  participant_ = fusion::dds::CreateParticipant(config_.dds_domain(), &dds_error);
+  if (participant_ < 0) return Status::Error(dds_error);
   DdsIngestOptions ingest_options;
   ingest_options.topic = config_.dds_topic();
   ingest_options.reliable = config_.ingest().reliability() == "reliable";
@@ -41,25 +42,21 @@ bool FusionServer::Start(std::string* error) {
   ingest_options.limits.map_resolution_m = config_.map().resolution_m();
   ingest_options.max_queued_bytes = std::size_t{config_.ingest().max_queued_mb()} << 20;
   p.ingest = std::make_unique<DdsIngest>(p.stack->queues(), ingest_options);
-  if (!p.ingest->Start(participant_, error)) return false;
+  if (Status started = p.ingest->Start(participant_); !started.ok()) return started;
 
-  const auto credentials = ServerCredentialsFor(config_.security(), error);
-  if (!credentials) {
-    *error = "security: " + *error;
-    return false;
-  }
+  const auto credentials = ServerCredentialsFor(config_.security());
+  if (!credentials.ok()) return credentials.status().WithContext("security");
   grpc::EnableDefaultHealthCheckService(true);
   // The plugin is registered for every server built after it: once, only when wanted.
   if (ReflectionEnabled(config_.security())) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   p.service = std::make_unique<MapService>(p.stack->state());
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(config_.listen_address(), credentials, &port_);
+  builder.AddListeningPort(config_.listen_address(), *credentials, &port_);
   builder.RegisterService(p.service.get());
   server_ = builder.BuildAndStart();
   if (!server_ || port_ == 0) {
-    *error = "cannot listen on '" + config_.listen_address() + "'";
     server_.reset();
-    return false;
+    return Status::Error("cannot listen on '" + config_.listen_address() + "'");
   }
   {
     std::lock_guard<std::mutex> lock(health_mutex_);
@@ -80,7 +77,7 @@ bool FusionServer::Start(std::string* error) {
                security.tls_client_ca_file().empty() ? "" : " with client certificates",
                security.tokens_file().empty() ? "no tokens" : "bearer tokens",
                ReflectionEnabled(security) ? "on" : "off");
-  return true;
+  return Status::Ok();
 }
 
 void FusionServer::SetHealth(const std::string& service, bool serving) {
@@ -89,8 +86,8 @@ void FusionServer::SetHealth(const std::string& service, bool serving) {
   if (!serving) spdlog::warn("health: {} NOT_SERVING", service);
 }
 
-bool FusionServer::Shutdown(std::chrono::milliseconds deadline) {
-  if (stopped_ || !parts_) return true;
+Status FusionServer::Shutdown(std::chrono::milliseconds deadline) {
+  if (stopped_ || !parts_) return Status::Ok();
   stopped_ = true;
   Parts& p = *parts_;
   {
@@ -105,7 +102,7 @@ bool FusionServer::Shutdown(std::chrono::milliseconds deadline) {
     server_.reset();
   }
   if (p.ingest) p.ingest->Stop();
-  const bool saved = p.stack ? p.stack->Finish() : true;
+  const Status saved = p.stack ? p.stack->Finish() : Status::Ok();
   if (participant_ > 0) {
     dds_delete(participant_);
     participant_ = 0;

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "fusion/clients/status.h"
+#include "fusion/core/status.h"
 
 namespace fusion::clients {
 

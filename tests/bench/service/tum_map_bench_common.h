@@ -174,16 +174,15 @@ struct CoreSetup {
 
 inline std::optional<CoreSetup> CoreSetupFromFile(const std::string& path) {
   v1::ServiceConfig config = fusion::service::DefaultConfig();
-  std::string error;
-  if (!fusion::service::LoadConfigFile(path, &config, &error) ||
-      !fusion::service::ValidateConfig(config, &error)) {
-    std::fprintf(stderr, "configuration: %s\n", error.c_str());
+  if (const fusion::Status loaded = fusion::service::LoadConfigFile(path, &config); !loaded.ok()) {
+    std::fprintf(stderr, "configuration: %s\n", loaded.message().c_str());
     return std::nullopt;
   }
-  auto sensor = fusion::service::SensorSetupFromConfig(config.sensors(0), &error);
-  auto map = fusion::service::WorldMapOptionsFromConfig(config.map(), &error);
-  if (!sensor || !map) {
-    std::fprintf(stderr, "configuration: %s\n", error.c_str());
+  auto sensor = fusion::service::SensorSetupFromConfig(config.sensors(0));
+  auto map = fusion::service::WorldMapOptionsFromConfig(config.map());
+  if (!sensor.ok() || !map.ok()) {
+    std::fprintf(stderr, "configuration: %s\n",
+                 (sensor.ok() ? map.status() : sensor.status()).message().c_str());
     return std::nullopt;
   }
   return CoreSetup{*sensor, *map};

@@ -90,7 +90,7 @@ struct Options {
 };
 
 // "600", "600s", "10m", "1h", "0.5m" -> seconds.
-inline clients::Status ParseDuration(const std::string& text, double* seconds) {
+inline fusion::Status ParseDuration(const std::string& text, double* seconds) {
   double scale = 1;
   std::string number = text;
   if (!number.empty()) {
@@ -102,9 +102,9 @@ inline clients::Status ParseDuration(const std::string& text, double* seconds) {
   }
   double value = 0;
   if (auto s = clients::ParseDouble("--duration", number, &value); !s.ok()) return s;
-  if (!(value > 0)) return clients::Status::Error("--duration must be positive");
+  if (!(value > 0)) return fusion::Status::Error("--duration must be positive");
   *seconds = value * scale;
-  return clients::Status::Ok();
+  return fusion::Status::Ok();
 }
 
 // "A-B" (seconds, A <= B) or "AxB" (integers).
@@ -116,61 +116,61 @@ inline bool SplitPair(const std::string& text, char separator, std::string* a, s
   return true;
 }
 
-inline clients::Status ParseStay(const std::string& text, Options* o) {
+inline fusion::Status ParseStay(const std::string& text, Options* o) {
   std::string a, b;
-  if (!SplitPair(text, '-', &a, &b)) return clients::Status::Error("--stay: expected A-B");
+  if (!SplitPair(text, '-', &a, &b)) return fusion::Status::Error("--stay: expected A-B");
   if (auto s = clients::ParseDouble("--stay", a, &o->stay_min_s); !s.ok()) return s;
   if (auto s = clients::ParseDouble("--stay", b, &o->stay_max_s); !s.ok()) return s;
   if (!(o->stay_min_s > 0 && o->stay_min_s <= o->stay_max_s))
-    return clients::Status::Error("--stay: need 0 < A <= B");
-  return clients::Status::Ok();
+    return fusion::Status::Error("--stay: need 0 < A <= B");
+  return fusion::Status::Ok();
 }
 
-inline clients::Status ParseGrid(const std::string& text, Options* o) {
+inline fusion::Status ParseGrid(const std::string& text, Options* o) {
   std::string a, b;
   std::uint64_t cols = 0, rows = 0;
-  if (!SplitPair(text, 'x', &a, &b)) return clients::Status::Error("--stoc-grid: expected CxR");
+  if (!SplitPair(text, 'x', &a, &b)) return fusion::Status::Error("--stoc-grid: expected CxR");
   if (auto s = clients::ParseUint("--stoc-grid", a, &cols); !s.ok()) return s;
   if (auto s = clients::ParseUint("--stoc-grid", b, &rows); !s.ok()) return s;
   if (cols < 1 || rows < 1 || cols > 4096 || rows > 4096)
-    return clients::Status::Error("--stoc-grid: 1..4096 each");
+    return fusion::Status::Error("--stoc-grid: 1..4096 each");
   o->stoc_cols = static_cast<int>(cols);
   o->stoc_rows = static_cast<int>(rows);
-  return clients::Status::Ok();
+  return fusion::Status::Ok();
 }
 
 // "QueryPoints=500,FindPlanes=0": weights of the named RPCs of the mix.
-inline clients::Status ParseMix(const std::string& text, Options* o) {
+inline fusion::Status ParseMix(const std::string& text, Options* o) {
   std::size_t at = 0;
   while (at <= text.size()) {
     const std::size_t end = std::min(text.find(',', at), text.size());
     std::string name, weight_text;
     if (!SplitPair(text.substr(at, end - at), '=', &name, &weight_text))
-      return clients::Status::Error("--mix: expected RPC=WEIGHT,...");
+      return fusion::Status::Error("--mix: expected RPC=WEIGHT,...");
     std::uint64_t weight = 0;
     if (auto s = clients::ParseUint("--mix", weight_text, &weight); !s.ok()) return s;
     auto it = std::find_if(o->mix.begin(), o->mix.end(),
                            [&](const Weighted& w) { return name == RpcName(w.rpc); });
     if (it != o->mix.end()) it->weight = static_cast<int>(std::min<std::uint64_t>(weight, 1000000));
     if (it == o->mix.end())
-      return clients::Status::Error("--mix: '" + name + "' is not an RPC of the mix");
+      return fusion::Status::Error("--mix: '" + name + "' is not an RPC of the mix");
     at = end + 1;
   }
   int total = 0;
   for (const Weighted& w : o->mix) total += w.weight;
-  if (total <= 0) return clients::Status::Error("--mix: every weight is 0");
-  return clients::Status::Ok();
+  if (total <= 0) return fusion::Status::Error("--mix: every weight is 0");
+  return fusion::Status::Ok();
 }
 
-inline clients::Status ParseInt(const std::string& flag, const std::string& v, std::int64_t* out) {
+inline fusion::Status ParseInt(const std::string& flag, const std::string& v, std::int64_t* out) {
   std::uint64_t u = 0;
   if (auto s = clients::ParseUint(flag, v, &u); !s.ok()) return s;
   *out = static_cast<std::int64_t>(u);
-  return clients::Status::Ok();
+  return fusion::Status::Ok();
 }
 
 // One flag with its value.
-inline clients::Status ParseFlag(const std::string& flag, const std::string& v, Options* o) {
+inline fusion::Status ParseFlag(const std::string& flag, const std::string& v, Options* o) {
   using clients::ParseDouble;
   using clients::ParseUint;
   if (flag == "--duration") return ParseDuration(v, &o->duration_s);
@@ -194,26 +194,26 @@ inline clients::Status ParseFlag(const std::string& flag, const std::string& v, 
                       : flag == "--stoc-id"   ? &o->stoc_id
                       : flag == "--json"      ? &o->json_path
                                               : nullptr;
-  if (text == nullptr) return clients::Status::Error("unknown flag " + flag);
+  if (text == nullptr) return fusion::Status::Error("unknown flag " + flag);
   *text = v;
-  return clients::Status::Ok();
+  return fusion::Status::Ok();
 }
 
-inline clients::Status CheckOptions(const Options& o) {
+inline fusion::Status CheckOptions(const Options& o) {
   if (o.clients > 1000 || o.subscribers > 1000)
-    return clients::Status::Error("--clients and --subscribers: at most 1000");
-  if (!(o.rate_hz > 0 && o.rate_hz <= 1000)) return clients::Status::Error("--rate: (0, 1000]");
-  if (!(o.think_ms >= 0)) return clients::Status::Error("--think-ms must be >= 0");
+    return fusion::Status::Error("--clients and --subscribers: at most 1000");
+  if (!(o.rate_hz > 0 && o.rate_hz <= 1000)) return fusion::Status::Error("--rate: (0, 1000]");
+  if (!(o.think_ms >= 0)) return fusion::Status::Error("--think-ms must be >= 0");
   if (!(o.save_every_s >= 0 && o.reset_every_s >= 0))
-    return clients::Status::Error("--save-every and --reset-every must be >= 0");
-  if (o.domain > 230) return clients::Status::Error("--domain must be 0..230");
+    return fusion::Status::Error("--save-every and --reset-every must be >= 0");
+  if (o.domain > 230) return fusion::Status::Error("--domain must be 0..230");
   if (!o.target.empty() && o.domain < 0)
-    return clients::Status::Error("--target needs --domain (the target's DDS domain)");
+    return fusion::Status::Error("--target needs --domain (the target's DDS domain)");
   if (!o.target.empty() && (!o.fusiond.empty() || !o.config.empty()))
-    return clients::Status::Error("--fusiond and --config start a fusiond: not with --target");
+    return fusion::Status::Error("--fusiond and --config start a fusiond: not with --target");
   if (o.target.empty() && o.fusiond_pid >= 0)
-    return clients::Status::Error("--fusiond-pid goes with --target");
-  return clients::Status::Ok();
+    return fusion::Status::Error("--fusiond-pid goes with --target");
+  return fusion::Status::Ok();
 }
 
 // Returns 0 to go on, else the exit code (0 after --help is reported as -1: exit 0).

@@ -11,16 +11,18 @@ namespace fusion::fuzz {
 namespace {
 
 Outcome CheckAccepted(const fusion::v1::ServiceConfig& config) {
-  std::string error;
   for (int i = 0; i < config.sensors_size(); ++i) {
-    if (!service::SensorSetupFromConfig(config.sensors(i), &error)) {
-      return Broken("accepted sensors[" + std::to_string(i) + "] does not convert: " + error);
+    if (const auto setup = service::SensorSetupFromConfig(config.sensors(i)); !setup.ok()) {
+      return Broken("accepted sensors[" + std::to_string(i) +
+                    "] does not convert: " + setup.status().message());
     }
   }
-  if (!service::WorldMapOptionsFromConfig(config.map(), &error)) {
-    return Broken("accepted map does not convert: " + error);
+  if (const auto options = service::WorldMapOptionsFromConfig(config.map()); !options.ok()) {
+    return Broken("accepted map does not convert: " + options.status().message());
   }
-  if (!service::ValidateConfig(config, &error)) return Broken("not valid twice: " + error);
+  if (const Status valid = service::ValidateConfig(config); !valid.ok()) {
+    return Broken("not valid twice: " + valid.message());
+  }
   return Accepted();
 }
 
@@ -28,8 +30,9 @@ Outcome RunConfig(const std::uint8_t* data, std::size_t size, const char* name) 
   const std::string path = WriteScratch(name, data, size);
   if (path.empty()) return Broken("cannot write the scratch file");
   auto config = service::DefaultConfig();
-  std::string error;
-  if (!service::LoadConfigFile(path, &config, &error)) return Rejected(error);
+  if (const Status loaded = service::LoadConfigFile(path, &config); !loaded.ok()) {
+    return Rejected(loaded.message());
+  }
   return CheckAccepted(config);
 }
 

@@ -15,7 +15,7 @@ Outcome RunRecording(const std::uint8_t* data, std::size_t size) {
   const std::string path = WriteScratch("input.frec", bytes.data(), bytes.size());
   if (path.empty()) return Broken("cannot write the scratch file");
   std::unique_ptr<clients::RecordingReader> reader;
-  if (clients::Status s = clients::RecordingReader::Open(path, &reader); !s.ok()) {
+  if (fusion::Status s = clients::RecordingReader::Open(path, &reader); !s.ok()) {
     return Rejected(s.message());
   }
   if (reader == nullptr) return Broken("Open succeeded without a reader");
@@ -23,7 +23,7 @@ Outcome RunRecording(const std::uint8_t* data, std::size_t size) {
   if (reader->size() > reader->file_size_bytes()) return Broken("more records than bytes");
   for (std::size_t i = 0; i < reader->size(); ++i) {
     fusion::v1::RecordedCloud cloud;
-    if (clients::Status s = reader->Read(i, &cloud); !s.ok() && s.message().empty()) {
+    if (fusion::Status s = reader->Read(i, &cloud); !s.ok() && s.message().empty()) {
       return Broken("record " + std::to_string(i) + " failed without a message");
     }
   }

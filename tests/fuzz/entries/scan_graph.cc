@@ -10,7 +10,7 @@ Outcome RunScanGraph(const std::uint8_t* data, std::size_t size) {
   const std::string path = WriteScratch("scan.graph", data, size);
   if (path.empty()) return Broken("cannot write the scratch file");
   std::vector<fusion::v1::RecordedCloud> clouds;
-  if (clients::Status s = clients::ReadScanGraph(path, &clouds); !s.ok()) {
+  if (fusion::Status s = clients::ReadScanGraph(path, &clouds); !s.ok()) {
     return Rejected(s.message());
   }
   if (clouds.empty()) return Broken("accepted a graph without nodes");

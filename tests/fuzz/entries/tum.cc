@@ -60,13 +60,13 @@ Outcome RunTum(const std::uint8_t* data, std::size_t size) {
   options.max_frames = kMaxFrames;
   std::uint64_t frames = 0;
   Outcome broken;
-  const clients::Status s = clients::ImportTum(options, [&](fusion::v1::RecordedCloud&& cloud) {
+  const fusion::Status s = clients::ImportTum(options, [&](fusion::v1::RecordedCloud&& cloud) {
     ++frames;
     if (Outcome o = CheckShape(cloud); o.verdict == Verdict::kBroken) broken = o;
     if (Outcome o = CheckUnitPose(cloud.t_world_sensor()); o.verdict == Verdict::kBroken)
       broken = o;
     if (cloud.sequence_number() != frames) broken = Broken("sequence numbers do not count frames");
-    return clients::Status::Ok();
+    return fusion::Status::Ok();
   });
   if (broken.verdict == Verdict::kBroken) return broken;
   if (!s.ok()) return Rejected(s.message());

@@ -13,7 +13,7 @@ Outcome RunXyzScan(const std::uint8_t* data, std::size_t size) {
   fusion::v1::RecordedPose pose;
   pose.set_qw(1.0);
   std::vector<fusion::v1::RecordedCloud> clouds;
-  if (clients::Status s = clients::ReadXyzScan(path, pose, &clouds); !s.ok()) {
+  if (fusion::Status s = clients::ReadXyzScan(path, pose, &clouds); !s.ok()) {
     return Rejected(s.message());
   }
   if (clouds.empty()) return Broken("accepted a scan without clouds");

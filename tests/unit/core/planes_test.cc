@@ -4,7 +4,11 @@
 #include <octomap/OcTree.h>
 
 #include <cmath>
+#include <functional>
 #include <random>
+#include <stdexcept>
+#include <string>
+#include <utility>
 
 namespace fusion {
 namespace {
@@ -122,6 +126,34 @@ TEST(Planes, AStopRequestEndsTheSearchInEveryPhase) {
     EXPECT_EQ(search.status, PlaneSearchStatus::kStopped) << stop_at;
     EXPECT_TRUE(search.planes.empty());
     EXPECT_EQ(polls, stop_at) << "the search went on after being told to stop";
+  }
+}
+
+TEST(Planes, OptionsOutsideTheirRangeAreNamedAndRefused) {
+  EXPECT_TRUE(HoughOptions{}.IsValid());
+  const std::pair<std::function<void(HoughOptions*)>, std::string> cases[] = {
+      {[](HoughOptions* o) { o->phi_bin_rad = 0.0; }, "phi_bin_rad"},
+      {[](HoughOptions* o) { o->theta_bin_rad = std::nan(""); }, "theta_bin_rad"},
+      {[](HoughOptions* o) { o->d_bin_m = -0.01; }, "d_bin_m"},
+      {[](HoughOptions* o) { o->min_probability = 1.0; }, "min_probability"},
+      {[](HoughOptions* o) { o->max_planes = 0; }, "max_planes"},
+      {[](HoughOptions* o) { o->nms_angle_rad = -1.0; }, "nms_angle_rad"},
+      {[](HoughOptions* o) { o->nms_distance_m = INFINITY; }, "nms_distance_m"},
+      {[](HoughOptions* o) { o->support_distance_m = -0.1; }, "support_distance_m"},
+      {[](HoughOptions* o) { o->refine_iterations = -1; }, "refine_iterations"},
+      {[](HoughOptions* o) {
+         o->region = Eigen::AlignedBox3d(Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 1));
+       },
+       "region"},
+  };
+  octomap::OcTree tree(0.05);
+  for (const auto& [spoil, field] : cases) {
+    HoughOptions options;
+    spoil(&options);
+    std::string why;
+    EXPECT_FALSE(options.IsValid(&why)) << field;
+    EXPECT_EQ(why.rfind(field, 0), 0u) << field << " gave: " << why;
+    EXPECT_THROW((void)SearchPlanes(tree, options), std::invalid_argument) << field;
   }
 }
 

@@ -1,6 +1,9 @@
 #include "fusion/service/admission.h"
 
 #include <gtest/gtest.h>
+
+#include <atomic>
+#include <memory>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -69,6 +72,32 @@ TEST(AdmissionTest, ThePoolRunsEveryTaskOnItsOwnLowPriorityThreads) {
   EXPECT_EQ(ran, 50);
   EXPECT_EQ(wrong_nice, 0);
   EXPECT_EQ(NiceOfThisThread(), base) << "only the pool's threads";
+}
+
+TEST(AdmissionTest, ThePoolCallsItsAfterTaskHookAfterEachTaskOnceItsCapturesAreGone) {
+  std::atomic<int> hooks{0};
+  std::atomic<int> captures_alive_at_hook{0};
+  auto capture = std::make_shared<int>(0);
+  const std::weak_ptr<int> watch = capture;
+  {
+    QueryPool pool(1, NiceOfThisThread(), [&] {
+      ++hooks;
+      if (!watch.expired()) ++captures_alive_at_hook;
+    });
+    pool.Post([held = std::move(capture)] { (void)held; });
+    for (int i = 0; i < 19; ++i) pool.Post([] {});
+  }  // the destructor runs what is queued, then joins
+  EXPECT_EQ(hooks, 20);
+  EXPECT_EQ(captures_alive_at_hook, 0) << "a task's captures were still alive when the hook ran";
+}
+
+TEST(AdmissionTest, TheHeapTrimmerTrimsAtMostOncePerInterval) {
+  HeapTrimmer trimmer(std::chrono::milliseconds(500));
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_TRUE(trimmer.MaybeTrim(t0)) << "the first call trims";
+  EXPECT_FALSE(trimmer.MaybeTrim(t0 + std::chrono::milliseconds(499)));
+  EXPECT_TRUE(trimmer.MaybeTrim(t0 + std::chrono::milliseconds(500)));
+  EXPECT_FALSE(trimmer.MaybeTrim(t0 + std::chrono::milliseconds(600)));
 }
 
 }  // namespace

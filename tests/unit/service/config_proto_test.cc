@@ -47,30 +47,30 @@ TEST(ConfigProtoTest, BinaryTextAndJsonRoundTrip) {
 TEST(ConfigProtoTest, FileOverridesDefaults) {
   const auto path = WriteTemp("fusiond_ok.pbtxt", "dds_domain: 42\nlog_level: \"debug\"\n");
   auto config = DefaultConfig();
-  std::string error;
-  ASSERT_TRUE(LoadConfigFile(path, &config, &error)) << error;
+  fusion::Status status;
+  ASSERT_TRUE((status = LoadConfigFile(path, &config)).ok()) << status.message();
   EXPECT_EQ(config.dds_domain(), 42u);
   EXPECT_EQ(config.log_level(), "debug");
   EXPECT_EQ(config.listen_address(), "127.0.0.1:0");  // default kept
 }
 
 TEST(ConfigProtoTest, BadFilesAreRefusedWithTheFieldNamed) {
-  std::string error;
+  fusion::Status status;
   auto config = DefaultConfig();
-  EXPECT_FALSE(LoadConfigFile(WriteTemp("bad1.pbtxt", "dds_domian: 3\n"), &config, &error));
-  EXPECT_NE(error.find("dds_domian"), std::string::npos) << error;
-  EXPECT_NE(error.find("line 1"), std::string::npos) << error;
+  EXPECT_FALSE((status = LoadConfigFile(WriteTemp("bad1.pbtxt", "dds_domian: 3\n"), &config)).ok());
+  EXPECT_NE(status.message().find("dds_domian"), std::string::npos) << status.message();
+  EXPECT_NE(status.message().find("line 1"), std::string::npos) << status.message();
 
   config = DefaultConfig();
-  EXPECT_FALSE(LoadConfigFile(WriteTemp("bad2.pbtxt", "dds_domain: 999\n"), &config, &error));
-  EXPECT_NE(error.find("dds_domain"), std::string::npos) << error;
+  EXPECT_FALSE((status = LoadConfigFile(WriteTemp("bad2.pbtxt", "dds_domain: 999\n"), &config)).ok());
+  EXPECT_NE(status.message().find("dds_domain"), std::string::npos) << status.message();
 
   config = DefaultConfig();
-  EXPECT_FALSE(LoadConfigFile(WriteTemp("bad3.json", "{\"logLevel\": \"loud\"}"), &config, &error));
-  EXPECT_NE(error.find("log_level"), std::string::npos) << error;
+  EXPECT_FALSE((status = LoadConfigFile(WriteTemp("bad3.json", "{\"logLevel\": \"loud\"}"), &config)).ok());
+  EXPECT_NE(status.message().find("log_level"), std::string::npos) << status.message();
 
-  EXPECT_FALSE(LoadConfigFile("/nonexistent/fusiond.pbtxt", &config, &error));
-  EXPECT_NE(error.find("cannot open"), std::string::npos) << error;
+  EXPECT_FALSE((status = LoadConfigFile("/nonexistent/fusiond.pbtxt", &config)).ok());
+  EXPECT_NE(status.message().find("cannot open"), std::string::npos) << status.message();
 }
 
 // Each bad field of a configuration is refused with the field's path in the message.
@@ -110,9 +110,9 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
   };
   for (const auto& [text, field] : cases) {
     auto config = DefaultConfig();
-    std::string error;
-    EXPECT_FALSE(LoadConfigFile(WriteTemp("bad_field.pbtxt", text), &config, &error)) << text;
-    EXPECT_EQ(error.rfind(field, 0), 0u) << text << " gave: " << error;
+    fusion::Status status;
+    EXPECT_FALSE((status = LoadConfigFile(WriteTemp("bad_field.pbtxt", text), &config)).ok()) << text;
+    EXPECT_EQ(status.message().rfind(field, 0), 0u) << text << " gave: " << status.message();
   }
 }
 
@@ -122,33 +122,33 @@ TEST(ConfigProtoTest, FullExampleLoadsAndSensorsBecomeCoreSpecs) {
       (std::filesystem::path(__FILE__).parent_path() / "../../../docs/fusiond.example.pbtxt")
           .string();
   auto config = DefaultConfig();
-  std::string error;
-  ASSERT_TRUE(LoadConfigFile(example, &config, &error)) << error;
+  fusion::Status status;
+  ASSERT_TRUE((status = LoadConfigFile(example, &config)).ok()) << status.message();
   ASSERT_EQ(config.sensors_size(), 3);
-  auto sr = SensorSetupFromConfig(config.sensors(0), &error);
-  ASSERT_TRUE(sr) << error;
+  auto sr = SensorSetupFromConfig(config.sensors(0));
+  ASSERT_TRUE(sr.ok()) << sr.status().message();
   EXPECT_EQ(sr->spec.cols, 176);
-  auto custom = SensorSetupFromConfig(config.sensors(2), &error);
-  ASSERT_TRUE(custom) << error;
+  auto custom = SensorSetupFromConfig(config.sensors(2));
+  ASSERT_TRUE(custom.ok()) << custom.status().message();
   EXPECT_NEAR(custom->spec.fov_h_rad, 270.0 * M_PI / 180.0, 1e-9);
   EXPECT_EQ(custom->spec.model, ForwardModelKind::kClassicBeam);
   // The stereo camera is mounted 25 mm left of and 80 mm below the SR-3000's frame.
-  auto stereo = SensorSetupFromConfig(config.sensors(1), &error);
-  ASSERT_TRUE(stereo) << error;
+  auto stereo = SensorSetupFromConfig(config.sensors(1));
+  ASSERT_TRUE(stereo.ok()) << stereo.status().message();
   EXPECT_NEAR(stereo->T_published_sensor.translation().y(), 0.08, 1e-12);
-  auto options = WorldMapOptionsFromConfig(config.map(), &error);
-  ASSERT_TRUE(options) << error;
+  auto options = WorldMapOptionsFromConfig(config.map());
+  ASSERT_TRUE(options.ok()) << options.status().message();
   EXPECT_EQ(options->rule, FusionRule::kIndependentOpinionPool);
 }
 
 TEST(ConfigProtoTest, SensorFlagAddsAPresetSensor) {
   fusion::v1::SensorConfig sensor;
-  std::string error;
-  ASSERT_TRUE(ParseSensorFlag("front=sr3000", &sensor, &error));
+  fusion::Status status;
+  ASSERT_TRUE((status = ParseSensorFlag("front=sr3000", &sensor)).ok());
   EXPECT_EQ(sensor.id(), "front");
   EXPECT_EQ(sensor.preset(), "sr3000");
-  EXPECT_FALSE(ParseSensorFlag("front", &sensor, &error));
-  EXPECT_FALSE(ParseSensorFlag("=sr3000", &sensor, &error));
+  EXPECT_FALSE((status = ParseSensorFlag("front", &sensor)).ok());
+  EXPECT_FALSE((status = ParseSensorFlag("=sr3000", &sensor)).ok());
 }
 
 }  // namespace

@@ -60,8 +60,8 @@ class FusionWorkerTest : public ::testing::Test {
     tessellation_ = std::make_unique<BeamTessellation>(sensor_.spec);
     worker_ = std::make_unique<FusionWorker>(options, std::vector<SensorSetup>{sensor_}, &queues_,
                                              &hub_);
-    std::string error;
-    ASSERT_TRUE(worker_->Start(nullptr, &error)) << error;
+    const fusion::Status started = worker_->Start(nullptr);
+    ASSERT_TRUE(started.ok()) << started.message();
   }
 
   // Queues `frames` clouds of a wall at range_m and waits until the map holds them.

@@ -43,10 +43,11 @@ class HandlerTest : public ::testing::Test {
         "map { resolution_m: 0.05 render_interval_ms: 10 }\n"
         "limits { max_points_per_query: 100 max_voxels_per_page: 1000 }\n"));
     config_.MergeFrom(Text<v1::ServiceConfig>(extra));
-    std::string error;
-    ASSERT_TRUE(ValidateConfig(config_, &error)) << error;
+    const fusion::Status valid = ValidateConfig(config_);
+    ASSERT_TRUE(valid.ok()) << valid.message();
     stack_ = std::make_unique<MapStack>(config_, nullptr);
-    ASSERT_TRUE(stack_->Start(&error)) << error;
+    const fusion::Status started = stack_->Start();
+    ASSERT_TRUE(started.ok()) << started.message();
     service_ = std::make_unique<MapService>(stack_->state());
     grpc::ServerBuilder builder;
     builder.RegisterService(service_.get());
@@ -63,7 +64,7 @@ class HandlerTest : public ::testing::Test {
     if (server_) server_->Shutdown(std::chrono::system_clock::now() + 2s);
     stack_->StopQueries();
     server_.reset();
-    EXPECT_TRUE(stack_->Finish());
+    EXPECT_TRUE(stack_->Finish().ok());
   }
 
   // The wall seen `frames` times from the origin; returns once all of them are in the map

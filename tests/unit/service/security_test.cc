@@ -14,11 +14,10 @@ const std::string kAdmin = "0123456789abcdef-admin";
 const std::string kRead = "0123456789abcdef-read";
 
 TEST(SecurityTest, TokensFileLinesCommentsAndErrors) {
-  std::vector<Token> tokens;
-  std::string error;
-  ASSERT_TRUE(ParseTokens("# tokens\n\nadmin " + kAdmin + "  # ops\n  read " + kRead + "\n",
-                          &tokens, &error))
-      << error;
+  const auto parsed =
+      ParseTokens("# tokens\n\nadmin " + kAdmin + "  # ops\n  read " + kRead + "\n");
+  ASSERT_TRUE(parsed.ok()) << parsed.status().message();
+  const std::vector<Token>& tokens = *parsed;
   ASSERT_EQ(tokens.size(), 2u);
   EXPECT_EQ(tokens[0].role, Role::kAdmin);
   EXPECT_EQ(tokens[0].secret, kAdmin);
@@ -27,12 +26,14 @@ TEST(SecurityTest, TokensFileLinesCommentsAndErrors) {
                                               "admin " + kAdmin + " extra", "read short",
                                               "# nothing\n"};
   for (const std::string& bad : bad_files) {
-    std::vector<Token> none;
-    EXPECT_FALSE(ParseTokens(bad, &none, &error)) << bad;
-    EXPECT_FALSE(error.empty());
+    const auto none = ParseTokens(bad);
+    EXPECT_FALSE(none.ok()) << bad;
+    EXPECT_FALSE(none.status().message().empty());
   }
-  EXPECT_FALSE(ParseTokens("read " + kRead + "\nbogus line here\n", &tokens, &error));
-  EXPECT_NE(error.find("line 2"), std::string::npos) << error;
+  const auto second_bad = ParseTokens("read " + kRead + "\nbogus line here\n");
+  EXPECT_FALSE(second_bad.ok());
+  EXPECT_NE(second_bad.status().message().find("line 2"), std::string::npos)
+      << second_bad.status().message();
 }
 
 TEST(SecurityTest, OnlyResetAndSaveNeedAdmin) {
@@ -74,9 +75,8 @@ fusion::v1::SecurityConfig Security(const std::string& cert, const std::string& 
 }
 
 TEST(SecurityTest, StaticChecksNameTheField) {
-  std::string error;
-  EXPECT_TRUE(ValidateSecurity(Security("", "", "", ""), &error));
-  EXPECT_TRUE(ValidateSecurity(Security("c", "k", "ca", "t"), &error));
+  EXPECT_TRUE(ValidateSecurity(Security("", "", "", "")).ok());
+  EXPECT_TRUE(ValidateSecurity(Security("c", "k", "ca", "t")).ok());
   const std::pair<fusion::v1::SecurityConfig, std::string> bad[] = {
       {Security("c", "", "", ""), "security.tls_key_file"},
       {Security("", "k", "", ""), "security.tls_cert_file"},
@@ -84,8 +84,9 @@ TEST(SecurityTest, StaticChecksNameTheField) {
       {Security("", "", "", "t"), "security.tokens_file"},
   };
   for (const auto& [security, field] : bad) {
-    EXPECT_FALSE(ValidateSecurity(security, &error)) << field;
-    EXPECT_EQ(error.rfind(field, 0), 0u) << error;
+    const fusion::Status checked = ValidateSecurity(security);
+    EXPECT_FALSE(checked.ok()) << field;
+    EXPECT_EQ(checked.message().rfind(field, 0), 0u) << checked.message();
   }
 }
 
@@ -99,11 +100,13 @@ TEST(SecurityTest, ReflectionFollowsTokensUnlessConfigured) {
 }
 
 TEST(SecurityTest, UnreadableFilesAreErrors) {
-  std::string error;
-  EXPECT_EQ(ServerCredentialsFor(Security("/nonexistent.pem", "/nonexistent.key", "", ""), &error),
-            nullptr);
-  EXPECT_NE(error.find("/nonexistent"), std::string::npos) << error;
-  EXPECT_NE(ServerCredentialsFor(Security("", "", "", ""), &error), nullptr);  // plaintext
+  const auto missing = ServerCredentialsFor(Security("/nonexistent.pem", "/nonexistent.key", "", ""));
+  EXPECT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("/nonexistent"), std::string::npos)
+      << missing.status().message();
+  const auto plaintext = ServerCredentialsFor(Security("", "", "", ""));
+  ASSERT_TRUE(plaintext.ok());
+  EXPECT_NE(*plaintext, nullptr);
 }
 
 }  // namespace

@@ -40,8 +40,9 @@ class ServicePersistenceTest : public ::testing::Test {
 
 TEST_F(ServicePersistenceTest, WritesAtomicallyAndLoadsBack) {
   std::uint64_t bytes = 0;
+  const fusion::Status written = WriteSnapshotFile(tree_, path_, &bytes);
+  ASSERT_TRUE(written.ok()) << written.message();
   std::string error;
-  ASSERT_TRUE(WriteSnapshotFile(tree_, path_, &bytes, &error)) << error;
   EXPECT_EQ(bytes, fs::file_size(path_));
   for (const auto& e : fs::directory_iterator(dir_)) {
     EXPECT_EQ(e.path().filename(), "map.ot") << "temporary file left behind";
@@ -124,16 +125,18 @@ TEST_F(ServicePersistenceTest, CraftedStructuresAreSetAsideNotLoaded) {
   // A legitimate deep tree (one voxel at depth 16) still loads.
   octomap::OcTree one(0.05);
   one.updateNode(octomap::point3d(1.0f, 2.0f, 3.0f), true);
+  const fusion::Status written = WriteSnapshotFile(one, path_, nullptr);
+  ASSERT_TRUE(written.ok()) << written.message();
   std::string error;
-  ASSERT_TRUE(WriteSnapshotFile(one, path_, nullptr, &error)) << error;
   std::unique_ptr<octomap::OcTree> loaded;
   ASSERT_EQ(LoadSnapshotFile(path_, 0.05, &loaded, &error), LoadStatus::kLoaded) << error;
   EXPECT_EQ(loaded->size(), one.size());
 }
 
 TEST_F(ServicePersistenceTest, OtherResolutionIsRefusedNotSetAside) {
+  const fusion::Status written = WriteSnapshotFile(tree_, path_, nullptr);
+  ASSERT_TRUE(written.ok()) << written.message();
   std::string error;
-  ASSERT_TRUE(WriteSnapshotFile(tree_, path_, nullptr, &error)) << error;
   std::unique_ptr<octomap::OcTree> loaded;
   EXPECT_EQ(LoadSnapshotFile(path_, 0.1, &loaded, &error), LoadStatus::kError);
   EXPECT_NE(error.find("resolution"), std::string::npos) << error;
@@ -141,9 +144,9 @@ TEST_F(ServicePersistenceTest, OtherResolutionIsRefusedNotSetAside) {
 }
 
 TEST_F(ServicePersistenceTest, UnwritableDirectoryIsReported) {
-  std::string error;
-  EXPECT_FALSE(WriteSnapshotFile(tree_, dir_ + "/no/such/dir/map.ot", nullptr, &error));
-  EXPECT_NE(error.find("open"), std::string::npos) << error;
+  const fusion::Status written = WriteSnapshotFile(tree_, dir_ + "/no/such/dir/map.ot", nullptr);
+  EXPECT_FALSE(written.ok());
+  EXPECT_NE(written.message().find("open"), std::string::npos) << written.message();
 }
 
 }  // namespace

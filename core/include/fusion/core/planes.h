@@ -16,6 +16,7 @@
 #include <cstddef>
 #include <functional>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace fusion {
@@ -48,6 +49,11 @@ struct HoughOptions {
   // Polled about every million steps of each loop; the search ends (kStopped) once it
   // returns true. Unset: never stops early.
   std::function<bool()> stop;
+
+  // Bins positive and finite (angles at most pi), min_probability in [0, 1), at least one
+  // plane, suppression and support distances finite and >= 0, refine_iterations >= 0, a
+  // region finite with min <= max. False with *why (may be null) naming the field.
+  [[nodiscard]] bool IsValid(std::string* why = nullptr) const;
 };
 
 struct Plane {

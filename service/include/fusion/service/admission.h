@@ -57,10 +57,12 @@ class IngestPressure {
 
 // Threads that run the expensive queries at nice `nice` (above the fusion worker's), so that
 // however many there are they cannot take the worker's CPU. Admission (CountedSlot) bounds
-// what is posted; the destructor runs what is queued, then joins.
+// what is posted; the destructor runs what is queued, then joins. `after_task` (may be
+// empty) runs on the pool thread after each task, once the task and its captures are gone:
+// the moment an expensive call's buffers have been freed (fusiond returns them to the OS).
 class QueryPool {
  public:
-  QueryPool(std::size_t threads, int nice);
+  QueryPool(std::size_t threads, int nice, std::function<void()> after_task = {});
   ~QueryPool();
   QueryPool(const QueryPool&) = delete;
   QueryPool& operator=(const QueryPool&) = delete;
@@ -73,7 +75,24 @@ class QueryPool {
   std::condition_variable cv_;
   std::deque<std::function<void()>> tasks_;
   bool stopping_ = false;
+  const std::function<void()> after_task_;
   std::vector<std::thread> threads_;
+};
+
+// Returns the heap's free memory to the OS (glibc's malloc_trim over every arena), at most
+// once per `min_interval`: the expensive calls free tens of megabytes at a time, which the
+// allocator would otherwise keep and the RSS would carry. Thread-safe.
+class HeapTrimmer {
+ public:
+  explicit HeapTrimmer(std::chrono::milliseconds min_interval) : min_interval_(min_interval) {}
+  // True if it trimmed (false: too soon after the last trim, or another thread is trimming).
+  bool MaybeTrim(std::chrono::steady_clock::time_point now);
+
+ private:
+  const std::chrono::milliseconds min_interval_;
+  std::mutex mutex_;
+  std::chrono::steady_clock::time_point last_{};
+  bool trimmed_ = false;
 };
 
 // Sets the calling thread's nice value (Linux keeps one per thread); false if refused.

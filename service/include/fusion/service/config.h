@@ -3,6 +3,7 @@
 
 #include <string>
 
+#include "fusion/core/status.h"
 #include "fusion/v1/config.pb.h"
 
 namespace fusion::service {
@@ -13,15 +14,13 @@ namespace fusion::service {
 
 // Loads a configuration file (".json" as JSON, anything else as protobuf text format) over
 // the defaults (scalars set in the file replace the defaults, sensors are appended).
-// Returns false with *error naming the file, line and field on failure.
-bool LoadConfigFile(const std::string& path, fusion::v1::ServiceConfig* config, std::string* error);
+// The error names the file, line and field.
+[[nodiscard]] Status LoadConfigFile(const std::string& path, fusion::v1::ServiceConfig* config);
 
-// Checks every field; returns false with *error naming the offending field
-// (e.g. "sensors[1].fov_h_deg: ...").
-bool ValidateConfig(const fusion::v1::ServiceConfig& config, std::string* error);
+// Checks every field; the error names the offending field (e.g. "sensors[1].fov_h_deg: ...").
+[[nodiscard]] Status ValidateConfig(const fusion::v1::ServiceConfig& config);
 
 // Parses a "--sensor ID=PRESET" command-line value into a sensor entry.
-bool ParseSensorFlag(const std::string& value, fusion::v1::SensorConfig* sensor,
-                     std::string* error);
+[[nodiscard]] Status ParseSensorFlag(const std::string& value, fusion::v1::SensorConfig* sensor);
 
 }  // namespace fusion::service

@@ -13,6 +13,7 @@
 #include "fusion/core/beam_grid.h"
 #include "fusion/core/planes.h"
 #include "fusion/core/sensor.h"
+#include "fusion/core/status.h"
 #include "fusion/core/world_map.h"
 #include "fusion/service/cloud.h"
 #include "fusion/v1/config.pb.h"
@@ -40,11 +41,9 @@ struct StateThresholds {
   double free = WorldMapOptions::kDefaultOccupancyThreshold;      // p < free: free (else unknown)
 };
 
-// Config -> core. Return std::nullopt with *error naming the field (relative to the message).
-[[nodiscard]] std::optional<SensorSetup> SensorSetupFromConfig(const fusion::v1::SensorConfig& c,
-                                                               std::string* error);
-[[nodiscard]] std::optional<WorldMapOptions> WorldMapOptionsFromConfig(
-    const fusion::v1::MapConfig& c, std::string* error);
+// Config -> core. An error names the field (relative to the message).
+[[nodiscard]] StatusOr<SensorSetup> SensorSetupFromConfig(const fusion::v1::SensorConfig& c);
+[[nodiscard]] StatusOr<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig& c);
 [[nodiscard]] StateThresholds ThresholdsFromConfig(const fusion::v1::MapConfig& c);
 // A transform whose quaternion is all zero is the identity.
 [[nodiscard]] Eigen::Isometry3d IsometryFromConfig(const fusion::v1::Transform& t);

@@ -10,6 +10,7 @@
 #include <string>
 #include <thread>
 
+#include "fusion/core/status.h"
 #include "fusion/service/ingest_queues.h"
 #include "fusion/service/validation.h"
 
@@ -34,7 +35,7 @@ class DdsIngest {
   DdsIngest& operator=(const DdsIngest&) = delete;
 
   // Creates the topic and reader in `participant` and starts the thread.
-  [[nodiscard]] bool Start(dds_entity_t participant, std::string* error);
+  [[nodiscard]] Status Start(dds_entity_t participant);
   // Stops the thread and deletes the reader (the participant stays).
   void Stop();
 

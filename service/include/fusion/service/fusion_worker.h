@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "fusion/core/sensor_periods.h"
+#include "fusion/core/status.h"
 #include "fusion/core/world_map.h"
 #include "fusion/service/conversions.h"
 #include "fusion/service/ingest_queues.h"
@@ -71,7 +72,7 @@ class FusionWorker {
 
   // `history` (may be null) is a map loaded from disk: the committed history to go on from.
   // Publishes the first version and starts the threads.
-  [[nodiscard]] bool Start(std::unique_ptr<octomap::OcTree> history, std::string* error);
+  [[nodiscard]] Status Start(std::unique_ptr<octomap::OcTree> history);
   // Integrates what is still queued, renders and commits everything, publishes, stops.
   void Stop();
 
@@ -95,7 +96,7 @@ class FusionWorker {
   };
 
   // Start's part under map_mutex_: the map, the sensors' lanes, the first publication.
-  bool StartLocked(std::unique_ptr<octomap::OcTree> history, std::string* error);
+  [[nodiscard]] Status StartLocked(std::unique_ptr<octomap::OcTree> history);
   void IntegratorLoop();
   void RendererLoop();
   void Integrate(const Cloud& cloud);

@@ -23,24 +23,24 @@ class MapStack {
 
   // Converts the configuration (it must have passed ValidateConfig), loads the last snapshot
   // (a corrupt one is set aside and logged, not an error), starts the worker and the
-  // persister. False with *error set when something cannot start.
-  [[nodiscard]] bool Start(std::string* error);
+  // persister. An error when something cannot start.
+  [[nodiscard]] Status Start();
 
   // Shutdown, in three steps around the transports: BeginShutdown refuses new calls and ends the
   // update streams; StopQueries joins the heavy-query pool (after the gRPC server has stopped:
   // no call may finish later); Finish drains the queues into the map and writes the final
-  // snapshot, false if it could not be written.
+  // snapshot: an error if it could not be written.
   void BeginShutdown();
   void StopQueries();
-  [[nodiscard]] bool Finish();
+  [[nodiscard]] Status Finish();
 
   [[nodiscard]] ServiceState* state() { return &state_; }
   [[nodiscard]] IngestQueues* queues() { return state_.queues; }
   [[nodiscard]] const WorldMapOptions& map_options() const { return map_options_; }
 
  private:
-  [[nodiscard]] bool ConvertConfig(std::string* error);
-  [[nodiscard]] bool LoadLastSnapshot(std::unique_ptr<octomap::OcTree>* base, std::string* error);
+  [[nodiscard]] Status ConvertConfig();
+  [[nodiscard]] Status LoadLastSnapshot(std::unique_ptr<octomap::OcTree>* base);
 
   fusion::v1::ServiceConfig config_;
   std::function<void(bool)> on_persistence_health_;
@@ -50,6 +50,9 @@ class MapStack {
   std::unique_ptr<SnapshotHub> hub_;
   std::unique_ptr<FusionWorker> worker_;
   std::unique_ptr<Persister> persister_;
+  // Gives back what the expensive calls freed, after each of them (docs/service.md,
+  // "Overload"); declared before the pool, which calls it.
+  HeapTrimmer heap_trimmer_{std::chrono::milliseconds(500)};
   std::unique_ptr<QueryPool> heavy_pool_;
   bool finished_ = false;
 };

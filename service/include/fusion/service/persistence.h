@@ -10,11 +10,13 @@
 #include <string>
 #include <vector>
 
+#include "fusion/core/status.h"
+
 namespace fusion::service {
 
 // Writes `tree` to `path` atomically. *bytes receives the file size.
-bool WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path, std::uint64_t* bytes,
-                       std::string* error);
+[[nodiscard]] Status WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path,
+                                       std::uint64_t* bytes);
 
 enum class LoadStatus {
   kLoaded,

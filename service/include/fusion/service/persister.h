@@ -11,6 +11,7 @@
 #include <string>
 #include <thread>
 
+#include "fusion/core/status.h"
 #include "fusion/service/map_snapshot.h"
 
 namespace fusion::service {
@@ -27,8 +28,8 @@ class Persister {
   [[nodiscard]] const std::string& path() const { return path_; }
   void Start();
   void Stop();
-  // Writes the current snapshot now. Returns false with *error on failure.
-  [[nodiscard]] bool SaveNow(std::uint64_t* version, std::uint64_t* bytes, std::string* error);
+  // Writes the current snapshot now: *version and *bytes say what was written.
+  [[nodiscard]] Status SaveNow(std::uint64_t* version, std::uint64_t* bytes);
   // The version the file on disk holds (loaded or last written); UINT64_MAX for none.
   void set_saved_version(std::uint64_t version);
   [[nodiscard]] std::uint64_t saves() const { return saves_.load(); }

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "fusion/core/status.h"
 #include "fusion/v1/config.pb.h"
 
 namespace fusion::service {
@@ -22,9 +23,8 @@ struct Token {
 };
 
 // Parses a tokens file's text: lines "<role> <token>", role read or admin, '#' comments and
-// blank lines skipped. False with *error naming the line on a malformed one or no token.
-[[nodiscard]] bool ParseTokens(const std::string& text, std::vector<Token>* tokens,
-                               std::string* error);
+// blank lines skipped. The error names the line of a malformed one, or says there is no token.
+[[nodiscard]] fusion::StatusOr<std::vector<Token>> ParseTokens(const std::string& text);
 
 // The role a call needs: admin for the calls that change or write the map, read otherwise.
 // `method` is the gRPC path, "/fusion.v1.FusionMap/ResetMap".
@@ -47,15 +47,15 @@ class TokenAuthProcessor final : public grpc::AuthMetadataProcessor {
   std::vector<Token> tokens_;
 };
 
-// The static checks of `security` (files named in pairs, TLS under tokens): false with *error
-// naming the field (fusiond exits 2).
-[[nodiscard]] bool ValidateSecurity(const fusion::v1::SecurityConfig& security, std::string* error);
+// The static checks of `security` (files named in pairs, TLS under tokens): the error names
+// the field (fusiond exits 2).
+[[nodiscard]] fusion::Status ValidateSecurity(const fusion::v1::SecurityConfig& security);
 
 // Server credentials for the configuration: insecure without TLS; TLS (mutual with a client
-// CA) with the files read; the token processor attached when tokens are configured. Null with
-// *error set when a file cannot be read or parsed.
-[[nodiscard]] std::shared_ptr<grpc::ServerCredentials> ServerCredentialsFor(
-    const fusion::v1::SecurityConfig& security, std::string* error);
+// CA) with the files read; the token processor attached when tokens are configured. An error
+// when a file cannot be read or parsed.
+[[nodiscard]] fusion::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(
+    const fusion::v1::SecurityConfig& security);
 
 // Whether gRPC server reflection is on: as configured, else on without tokens.
 [[nodiscard]] bool ReflectionEnabled(const fusion::v1::SecurityConfig& security);

@@ -9,6 +9,7 @@
 #include <mutex>
 #include <string>
 
+#include "fusion/core/status.h"
 #include "fusion/v1/config.pb.h"
 
 namespace fusion::service {
@@ -21,14 +22,14 @@ class FusionServer {
   FusionServer(const FusionServer&) = delete;
   FusionServer& operator=(const FusionServer&) = delete;
 
-  // Loads the last snapshot, starts the worker, joins DDS and starts listening. Returns false
-  // with *error set on failure (a corrupt snapshot is set aside and logged, not an error).
-  [[nodiscard]] bool Start(std::string* error);
+  // Loads the last snapshot, starts the worker, joins DDS and starts listening (a corrupt
+  // snapshot is set aside and logged, not an error).
+  [[nodiscard]] Status Start();
   // Port actually bound (useful with port 0).
   [[nodiscard]] int port() const { return port_; }
   // Stops serving (streams end, running calls get the deadline), leaves DDS, integrates what
-  // is queued, writes the final snapshot. False if that snapshot could not be written.
-  [[nodiscard]] bool Shutdown(std::chrono::milliseconds deadline = std::chrono::milliseconds(2000));
+  // is queued, writes the final snapshot: an error if that snapshot could not be written.
+  [[nodiscard]] Status Shutdown(std::chrono::milliseconds deadline = std::chrono::milliseconds(2000));
 
   // The health service's entry for snapshot writes (SERVING unless they fail).
   static constexpr const char* kPersistenceHealth = "fusion.v1.Persistence";

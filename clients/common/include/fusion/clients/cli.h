@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <string>
 
-#include "fusion/clients/status.h"
+#include "fusion/core/status.h"
 #include "fusion/v1/recording.pb.h"
 
 namespace fusion::clients {

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "fusion/clients/status.h"
+#include "fusion/core/status.h"
 #include "fusion/v1/recording.pb.h"
 #include "fusion_dds.h"
 

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "fusion/clients/status.h"
+#include "fusion/core/status.h"
 #include "fusion/v1/recording.pb.h"
 
 namespace fusion::clients {
