@@ -62,7 +62,7 @@ TEST(ServiceIngestTest, ValidSampleIsAcceptedAndConverted) {
   EXPECT_DOUBLE_EQ(cloud.T_world_published.translation().x(), 2.0);
 }
 
-TEST(ServiceIngestTest, EveryMalformationHasItsReason) {
+TEST(ServiceIngestTest, EveryMalformedShapeHasItsReason) {
   {
     Sample s;
     s.id = "";
@@ -105,6 +105,9 @@ TEST(ServiceIngestTest, EveryMalformationHasItsReason) {
     limits.max_points = 1;
     EXPECT_EQ(Check(s, limits), RejectReason::kTooManyPoints);
   }
+}
+
+TEST(ServiceIngestTest, EveryMalformedPoseHasItsReason) {
   {
     Sample s;
     s.msg.T_world_sensor.qz = std::numeric_limits<double>::infinity();
@@ -127,6 +130,9 @@ TEST(ServiceIngestTest, EveryMalformationHasItsReason) {
     s.msg.T_world_sensor.tz = -1e6;
     EXPECT_EQ(Check(s), RejectReason::kAbsurdTranslation);
   }
+}
+
+TEST(ServiceIngestTest, APoseBeyondTheMapsKeysIsOutsideMap) {
   {
     // Beyond the map's keys at 2 cm (+-655.36 m), well within max_abs_translation_m.
     IngestLimits limits;

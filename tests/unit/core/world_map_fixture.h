@@ -1,0 +1,77 @@
+// The fixture and helpers of the WorldMap tests (world_map_test.cc: input, periods, fusion;
+// world_map_publication_test.cc: what the publications carry, coarse free space, saturation):
+// an SR-3000 at 44 x 36 beams before the paper's board, 4 cm voxels.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "fusion/core/fusion_rules.h"
+#include "fusion/core/octree_merge.h"
+#include "fusion/core/projective_render.h"
+#include "fusion/core/world_map.h"
+#include "fusion/sim/scene.h"
+#include "fusion/sim/simulator.h"
+
+namespace fusion {
+
+inline constexpr double kRes = 0.04;
+
+struct Leaf {
+  octomap::OcTreeKey key;
+  unsigned depth;
+  float log_odds;
+};
+
+// Leaves in iteration order (depth first), coarse ones with their depth.
+inline std::vector<Leaf> Leaves(const octomap::OcTree& tree) {
+  std::vector<Leaf> leaves;
+  for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+    leaves.push_back({it.getKey(), it.getDepth(), it->getLogOdds()});
+  }
+  return leaves;
+}
+
+inline void ExpectSameLeaves(const octomap::OcTree& a, const octomap::OcTree& b) {
+  const auto la = Leaves(a);
+  const auto lb = Leaves(b);
+  ASSERT_EQ(la.size(), lb.size());
+  for (std::size_t i = 0; i < la.size(); ++i) {
+    ASSERT_EQ(la[i].key, lb[i].key) << i;
+    ASSERT_EQ(la[i].depth, lb[i].depth) << i;
+    ASSERT_EQ(la[i].log_odds, lb[i].log_odds) << i;
+  }
+}
+
+// A sensor's opinion as the map renders it.
+inline RenderedGrid Opinion(const WorldMap& map, const std::string& id, const Eigen::Isometry3d& T) {
+  return Render(*map.beam_grid(id), T, MapRenderOptions(map.options()));
+}
+
+class WorldMapTest : public ::testing::Test {
+ protected:
+  WorldMapTest()
+      : spec_(sim::WithTessellation(*SensorPreset("sr3000"), 44, 36)),
+        simulator_(sim::PaperBoardScene(), spec_, sim::SimOptions{}),
+        pose_(sim::ForwardLookingPose(Eigen::Vector3d::Zero())) {
+    options_.resolution_m = kRes;
+  }
+  sim::OrganizedCloud Frame() { return simulator_.Capture(pose_); }
+  static MapStatus Add(WorldMap* map, const std::string& id, const Eigen::Isometry3d& T,
+                       const sim::OrganizedCloud& c, bool* committed = nullptr) {
+    return map->Integrate(id, T, c.xyz.data(), c.size(), c.beyond_range, nullptr, committed);
+  }
+
+  void ExpectNothingOutsideTheMap();
+
+  SensorSpec spec_;
+  sim::RangeSimulator simulator_;
+  Eigen::Isometry3d pose_;
+  WorldMapOptions options_;
+};
+
+}  // namespace fusion
