@@ -36,6 +36,7 @@ Commands:
   watch       stream map updates
   beam        p(B) and p(m) of one beam
   reset       clear the map and every beam grid
+  clear-box   forget a box of the map (its voxels become unknown)
   save        write a snapshot to the service's persistence path
   help        this text
 
@@ -84,6 +85,10 @@ constexpr const char* kWatchUsage =
 constexpr const char* kBeamUsage =
     "Usage: fusionctl beam SENSOR ROW COL\n  p(B) and p(m) of one beam, as a table\n";
 constexpr const char* kResetUsage = "Usage: fusionctl reset\n  clear the map and every beam grid\n";
+constexpr const char* kClearBoxUsage =
+    "Usage: fusionctl clear-box MINX MINY MINZ MAXX MAXY MAXZ\n"
+    "  forget what the map knows in a box (world frame, metres): its voxels become unknown,\n"
+    "  every sensor's period restarts (an admin call where tokens are configured)\n";
 constexpr const char* kSaveUsage =
     "Usage: fusionctl save\n  write a snapshot to the service's persistence path\n";
 
@@ -115,6 +120,7 @@ const std::vector<CommandSpec> kCommands = {
     {"watch", Watch, kWatchUsage, {"--since", "--count"}, {"--versions-only"}, 0, 0, 0.0},
     {"beam", Beam, kBeamUsage, {}, {}, 3, 3, kCallTimeoutS},
     {"reset", Reset, kResetUsage, {}, {}, 0, 0, kCallTimeoutS},
+    {"clear-box", ClearBox, kClearBoxUsage, {}, {}, 6, 6, kCallTimeoutS},
     {"save", Save, kSaveUsage, {}, {}, 0, 0, kCallTimeoutS},
 };
 

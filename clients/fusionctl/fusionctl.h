@@ -93,6 +93,7 @@ int Health(Context& ctx, const Args& args);
 int Stats(Context& ctx, const Args& args);
 int Sensors(Context& ctx, const Args& args);
 int Reset(Context& ctx, const Args& args);
+int ClearBox(Context& ctx, const Args& args);
 int Save(Context& ctx, const Args& args);
 // query_commands.cc: questions about places in the map.
 int Points(Context& ctx, const Args& args);

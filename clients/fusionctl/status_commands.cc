@@ -1,4 +1,5 @@
-// fusionctl health, stats, sensors, reset and save: the service and its map as a whole.
+// fusionctl health, stats, sensors, reset, clear-box and save: the service and its map as a
+// whole.
 #include <cstdio>
 #include <map>
 
@@ -101,6 +102,24 @@ int Reset(Context& ctx, const Args&) {
     PrintJson(reply);
   } else {
     std::printf("map reset, version %llu\n", (ULL)reply.map_version());
+  }
+  return fusion::clients::kExitOk;
+}
+
+int ClearBox(Context& ctx, const Args& args) {
+  fusion::v1::ClearBoxRequest request;
+  if (!ParsePoint(args.positional, 0, request.mutable_min()) ||
+      !ParsePoint(args.positional, 3, request.mutable_max())) {
+    return Usage("clear-box needs MINX MINY MINZ MAXX MAXY MAXZ");
+  }
+  fusion::v1::ClearBoxResponse reply;
+  const auto status = Call(ctx, &Stub::ClearBox, request, &reply);
+  if (!status.ok()) return Failed(ctx, status);
+  if (ctx.json) {
+    PrintJson(reply);
+  } else {
+    std::printf("box cleared: %llu voxels forgotten, version %llu\n",
+                (ULL)reply.voxels_cleared(), (ULL)reply.map_version());
   }
   return fusion::clients::kExitOk;
 }

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <optional>
 #include <stdexcept>
 
 namespace fusion::detail {
@@ -353,6 +355,63 @@ void ForEachInRegion(
     return;
   }
   ForEachLeafBelow(tree, node, region.code, region.depth, f);
+}
+
+namespace {
+
+// Full-depth keys [lo, hi] per axis of the voxels whose centres lie in a box.
+struct KeyBox {
+  std::array<int, 3> lo{};
+  std::array<int, 3> hi{};
+};
+
+std::optional<KeyBox> KeysInBox(const Eigen::AlignedBox3d& box, double resolution_m) {
+  constexpr double kOffset = 32768.0;  // OctoMap's key of the voxel at the origin
+  KeyBox keys;
+  for (int a = 0; a < 3; ++a) {
+    // Centre of key k: (k - 32768 + 0.5) * resolution.
+    const double lo = std::ceil(box.min()[a] / resolution_m - 0.5) + kOffset;
+    const double hi = std::floor(box.max()[a] / resolution_m - 0.5) + kOffset;
+    if (!(lo <= hi) || hi < 0.0 || lo > 65535.0) return std::nullopt;  // NaN included
+    keys.lo[a] = static_cast<int>(std::max(lo, 0.0));
+    keys.hi[a] = static_cast<int>(std::min(hi, 65535.0));
+  }
+  return keys;
+}
+
+// `node` (null: inside a coarse leaf being split) at (code, depth).
+void CollectInBox(const octomap::OcTree& tree, const Node* node, bool split, std::uint64_t code,
+                  unsigned depth, const KeyBox& keys, std::vector<MapRegion>* out) {
+  const octomap::OcTreeKey first = KeyOfMorton(code);
+  const int size = 1 << (kTreeDepth - depth);
+  bool inside = true;
+  for (int a = 0; a < 3; ++a) {
+    const int k0 = first[a], k1 = first[a] + size - 1;
+    if (k1 < keys.lo[a] || k0 > keys.hi[a]) return;  // disjoint
+    inside = inside && k0 >= keys.lo[a] && k1 <= keys.hi[a];
+  }
+  if (inside) {
+    out->push_back({code, static_cast<std::uint8_t>(depth)});
+    return;
+  }
+  // Across a face (depth < 16: a voxel is inside or disjoint).
+  const bool leaf = split || !tree.nodeHasChildren(node);
+  for (unsigned c = 0; c < 8; ++c) {
+    if (!leaf && !tree.nodeChildExists(node, c)) continue;
+    CollectInBox(tree, leaf ? nullptr : tree.getNodeChild(node, c), leaf,
+                 code + c * MortonSpan(depth + 1), depth + 1, keys, out);
+  }
+}
+
+}  // namespace
+
+std::vector<MapRegion> RegionsInBox(const octomap::OcTree& tree,
+                                    const Eigen::AlignedBox3d& box_world) {
+  std::vector<MapRegion> regions;
+  const auto keys = KeysInBox(box_world, tree.getResolution());
+  if (tree.getRoot() == nullptr || !keys) return regions;
+  CollectInBox(tree, tree.getRoot(), false, 0, 0, *keys, &regions);
+  return regions;
 }
 
 void NormaliseRegions(std::vector<MapRegion>* regions) {

@@ -218,6 +218,34 @@ void WorldMap::Reset() {
   }
 }
 
+std::uint64_t WorldMap::ClearBox(const Eigen::AlignedBox3d& box_world) {
+  for (const auto& [id, s] : sensors_) {
+    (void)CommitLive(id);
+    s->rendered_frames = 0;
+    s->counters.frames_in_period = 0;
+    if (s->periods) s->periods->Reset();
+  }
+  // The history and the map hold the same now; both guide the cover, to miss nothing.
+  std::vector<MapRegion> regions = RegionsInBox(*committed_, box_world);
+  for (const MapRegion& r : RegionsInBox(Working(), box_world)) regions.push_back(r);
+  NormaliseRegions(&regions);
+  if (regions.empty()) return 0;
+  std::uint64_t voxels = 0;
+  for (const MapRegion& r : regions) {
+    ForEachInRegion(Working(), r, [&voxels](const octomap::OcTreeKey&, unsigned depth,
+                                            const octomap::OcTreeNode* node) {
+      if (node != nullptr) voxels += MortonSpan(depth);
+    });
+  }
+  CopyRegions(*committed_, octomap::OcTree(options_.resolution_m), regions);
+  RenderedGrid drivers(options_.resolution_m);
+  for (const MapRegion& r : regions) drivers.Append({r.code, 0.0f, r.depth});
+  const std::size_t before = pending_.size();
+  FuseRegions(Working(), policy_, Sources(nullptr), {&drivers}, &pending_);
+  MergeRun(before);
+  return voxels;
+}
+
 void WorldMap::MergeRun(std::size_t run_begin) {
   // Each merge reports its regions in order: keep the version's list one ordered run.
   const auto before = [](const MapRegion& a, const MapRegion& b) {

@@ -376,6 +376,38 @@ std::uint64_t FusionWorker::Reset() {
   return published_version_;
 }
 
+std::uint64_t FusionWorker::ClearBox(const Eigen::AlignedBox3d& box_world,
+                                     std::uint64_t* voxels) {
+  std::lock_guard<std::mutex> lock(map_mutex_);
+  for (const auto& lane : lanes_) {
+    std::unique_ptr<Period> open;
+    {
+      std::lock_guard<std::mutex> lane_lock(lane->mutex);
+      open = lane->periods->Seal();
+    }
+    if (!open) continue;
+    std::lock_guard<std::mutex> work(work_mutex_);
+    sealed_.push_back({lane.get(), std::move(open)});
+    ++lane->sealed_waiting;
+  }
+  for (;;) {
+    Sealed sealed{nullptr, nullptr};
+    {
+      std::lock_guard<std::mutex> work(work_mutex_);
+      if (sealed_.empty()) break;
+      sealed = std::move(sealed_.front());
+      sealed_.pop_front();
+    }
+    CommitSealed(std::move(sealed));
+  }
+  *voxels = map_->ClearBox(box_world);
+  PublishLocked();
+  spdlog::info("box [{:.3f} {:.3f} {:.3f}] - [{:.3f} {:.3f} {:.3f}] cleared: {} voxels; version {}",
+               box_world.min().x(), box_world.min().y(), box_world.min().z(), box_world.max().x(),
+               box_world.max().y(), box_world.max().z(), *voxels, published_version_);
+  return published_version_;
+}
+
 BeamLookup FusionWorker::InspectBeam(const std::string& sensor_id, std::optional<std::size_t> beam,
                                      std::size_t row, std::size_t col, BeamInspection* out) const {
   const Lane* lane = LaneOf(sensor_id);

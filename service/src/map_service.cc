@@ -260,6 +260,19 @@ grpc::ServerUnaryReactor* MapService::ResetMap(grpc::CallbackServerContext* cont
   });
 }
 
+grpc::ServerUnaryReactor* MapService::ClearBox(grpc::CallbackServerContext* context,
+                                               const fusion::v1::ClearBoxRequest* request,
+                                               fusion::v1::ClearBoxResponse* reply) {
+  return Unary(context, state_, "ClearBox", [&] {
+    Eigen::AlignedBox3d box;
+    if (Status checked = CheckClearBox(*request, &box); !checked.ok()) return checked;
+    std::uint64_t voxels = 0;
+    reply->set_map_version(state_->worker->ClearBox(box, &voxels));
+    reply->set_voxels_cleared(voxels);
+    return Status::OK;
+  });
+}
+
 grpc::ServerUnaryReactor* MapService::SaveMap(grpc::CallbackServerContext* context,
                                               const fusion::v1::SaveMapRequest*,
                                               fusion::v1::SaveMapResponse* reply) {

@@ -118,6 +118,18 @@ Status CheckGetSnapshot(const fusion::v1::GetSnapshotRequest& request) {
   return Status::OK;
 }
 
+Status CheckClearBox(const fusion::v1::ClearBoxRequest& request, Eigen::AlignedBox3d* box) {
+  if (!request.has_min() || !request.has_max()) return Invalid("give both min and max");
+  if (!FinitePoint(request.min()) || !FinitePoint(request.max())) {
+    return Invalid("min and max must be finite");
+  }
+  *box = Eigen::AlignedBox3d(FromProto(request.min()), FromProto(request.max()));
+  if ((box->min().array() > box->max().array()).any()) {
+    return Invalid("min must not exceed max on any axis");
+  }
+  return Status::OK;
+}
+
 std::string EncodePageToken(const octomap::OcTreeKey& key) {
   return "k" + std::to_string(key[0]) + "." + std::to_string(key[1]) + "." + std::to_string(key[2]);
 }

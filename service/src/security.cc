@@ -54,6 +54,7 @@ fusion::StatusOr<std::vector<Token>> ParseTokens(const std::string& text) {
 
 Role RequiredRole(const std::string& method) {
   static const char* const kAdminMethods[] = {"/fusion.v1.FusionMap/ResetMap",
+                                              "/fusion.v1.FusionMap/ClearBox",
                                               "/fusion.v1.FusionMap/SaveMap"};
   for (const char* admin : kAdminMethods) {
     if (method == admin) return Role::kAdmin;

@@ -294,6 +294,55 @@ TEST(CopyRegions, BringsAnOlderCopyUpToDate) {
   ExpectInvariants(copy, copy.getRoot());
 }
 
+// The cover of a box, checked voxel by voxel with OctoMap's own key-to-centre conversion, and
+// clearing it (CopyRegions from an empty tree) leaves every other voxel as it was.
+TEST(RegionsInBox, TileExactlyTheVoxelsWhoseCentresLieInTheBox) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 12; ++trial) {
+    const RenderedGrid grid = RandomGrid(rng, 0.8, {-3.0f, 1.5f});
+    octomap::OcTree tree(0.05);
+    FuseRegions(tree, FusionPolicy{}, {{nullptr, &grid}}, {&grid});
+    // Boxes around the cube's middle (the cube spans [-0.8, 0.8] m), faces off the voxel grid.
+    Eigen::Vector3d a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    const Eigen::AlignedBox3d box(a.cwiseMin(b) * 0.8, a.cwiseMax(b) * 0.8);
+    const auto in_box = [&](const KeyTuple& k) {
+      const octomap::point3d c = tree.keyToCoord(Key(k));
+      return box.contains(Eigen::Vector3d(c.x(), c.y(), c.z()));
+    };
+    const std::vector<MapRegion> regions = RegionsInBox(tree, box);
+    std::map<KeyTuple, int> covered;
+    for (std::size_t r = 0; r < regions.size(); ++r) {
+      if (r > 0) {
+        ASSERT_GE(regions[r].code, regions[r - 1].code + MortonSpan(regions[r - 1].depth));
+      }
+      const octomap::OcTreeKey k = KeyOfMorton(regions[r].code);
+      const int size = 1 << (kTreeDepth - regions[r].depth);
+      EXPECT_TRUE(in_box({k[0], k[1], k[2]}) &&
+                  in_box({k[0] + size - 1, k[1] + size - 1, k[2] + size - 1}))
+          << "region " << r << " reaches outside the box";
+      for (int x = 0; x < size; ++x)
+        for (int y = 0; y < size; ++y)
+          for (int z = 0; z < size; ++z) ++covered[{k[0] + x, k[1] + y, k[2] + z}];
+    }
+    const Dense before = DenseOf(tree);
+    Dense expected;
+    for (const auto& [k, v] : before) {
+      if (in_box(k)) {
+        EXPECT_EQ(covered.count(k), 1u) << "a voxel in the box is not covered";
+      } else {
+        expected[k] = v;
+      }
+    }
+    CopyRegions(tree, octomap::OcTree(0.05), regions);
+    EXPECT_EQ(DenseOf(tree), expected) << "trial " << trial;
+    ExpectInvariants(tree, tree.getRoot());
+  }
+  EXPECT_TRUE(RegionsInBox(octomap::OcTree(0.05), Eigen::AlignedBox3d(Eigen::Vector3d::Zero(),
+                                                                       Eigen::Vector3d::Ones()))
+                  .empty());
+}
+
 TEST(NormaliseRegions, DropsNestedRegions) {
   std::vector<MapRegion> r = {{MortonOf(Key({8, 8, 8})), 16},
                               {MortonOf(Key({8, 8, 8})), 14},

@@ -74,6 +74,64 @@ TEST_F(WorldMapTest, AFollowerOfThePublicationsReproducesTheMapExactly) {
   ASSERT_NO_FATAL_FAILURE(follow());
 }
 
+// ClearBox forgets exactly the voxels whose centres lie in the box (the live contribution
+// folded in first), leaves every other voxel as it was, and its publication lets a follower
+// reproduce the map.
+TEST_F(WorldMapTest, ClearBoxForgetsTheBoxAndNothingElse) {
+  WorldMap map(options_);
+  ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);
+  Follower follower(kRes);
+  std::uint64_t last = 0;
+  const auto follow = [&] {  // every version, in turn
+    const Publication p = map.Publish();
+    if (p.changes.version == last) return;
+    ASSERT_EQ(p.changes.version, last + 1);
+    last = p.changes.version;
+    follower.Apply(p);
+  };
+  ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
+  ASSERT_EQ(map.Commit("sr"), MapStatus::kOk);  // history
+  ASSERT_NO_FATAL_FAILURE(follow());
+  ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);  // and a live contribution
+  ASSERT_NO_FATAL_FAILURE(follow());
+  ASSERT_GT(map.Counters("sr")->live_nodes, 0u);
+
+  octomap::OcTree before(map.tree());
+  before.expand();  // every voxel a leaf
+  const Eigen::AlignedBox3d box(Eigen::Vector3d(1.0, -0.3, -0.25), Eigen::Vector3d(2.0, 0.3, 0.35));
+  std::uint64_t in_box = 0, occupied_in_box = 0;
+  for (auto it = before.begin_leafs(); it != before.end_leafs(); ++it) {
+    if (!box.contains(Eigen::Vector3d(it.getX(), it.getY(), it.getZ()))) continue;
+    ++in_box;
+    occupied_in_box += before.isNodeOccupied(*it) ? 1 : 0;
+  }
+  ASSERT_GT(occupied_in_box, 50u) << "the box holds part of the board";
+
+  EXPECT_EQ(map.ClearBox(box), in_box);
+  EXPECT_EQ(map.Counters("sr")->live_nodes, 0u) << "folded into the history";
+  EXPECT_EQ(map.Counters("sr")->frames_in_period, 0u) << "the period restarted";
+  const octomap::OcTree& after = map.tree();
+  for (auto it = before.begin_leafs(); it != before.end_leafs(); ++it) {
+    const octomap::OcTreeNode* node = after.search(it.getKey());
+    if (box.contains(Eigen::Vector3d(it.getX(), it.getY(), it.getZ()))) {
+      ASSERT_EQ(node, nullptr) << "a voxel in the box is still known";
+    } else {
+      ASSERT_NE(node, nullptr) << "a voxel outside the box was forgotten";
+      ASSERT_EQ(node->getLogOdds(), it->getLogOdds());
+    }
+  }
+  const Publication p = map.Publish();
+  EXPECT_EQ(p.changes.version, last + 1);
+  EXPECT_FALSE(p.changes.regions.empty());
+  ASSERT_NO_FATAL_FAILURE(follow());
+  ExpectSameLeaves(*p.tree, follower.tree());
+  EXPECT_EQ(map.ClearBox(box), 0u) << "nothing left to forget";
+  // The history was cleared too, and the period restarted: the next commit brings nothing back.
+  ASSERT_EQ(map.Commit("sr"), MapStatus::kOk);
+  EXPECT_EQ(map.Occupancy(Eigen::Vector3d(1.5, 0.0, 0.05)), std::nullopt);
+}
+
 TEST_F(WorldMapTest, CoarseFreeNodesAnswerFreeAndSplitForANewSurface) {
   WorldMap map(options_);
   ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);

@@ -100,6 +100,7 @@ TEST_F(FusionctlCallsTest, JsonIsParseableForEveryCommand) {
       {{"planes"}, [] { return new v1::FindPlanesResponse; }, 1},
       {{"beam", "sr", "1", "2"}, [] { return new v1::InspectBeamResponse; }, 1},
       {{"reset"}, [] { return new v1::ResetMapResponse; }, 1},
+      {{"clear-box", "0", "0", "0", "1", "1", "1"}, [] { return new v1::ClearBoxResponse; }, 1},
       {{"save"}, [] { return new v1::SaveMapResponse; }, 1},
       {{"watch", "--count", "2"}, [] { return new v1::MapUpdate; }, 2},
       {{"snapshot", bt}, [] { return new pb::Struct; }, 1},
@@ -164,6 +165,19 @@ TEST_F(FusionctlCallsTest, BoxSummaryCountsWhatItPrints) {
   ASSERT_TRUE(pb::util::JsonStringToMessage(r.out, &gathered).ok()) << r.out;
   EXPECT_EQ(gathered.voxels_size(), 4);
   EXPECT_NE(r.err.find("# 4 voxels"), std::string::npos) << r.err;
+}
+
+TEST_F(FusionctlCallsTest, ClearBoxSendsTheBoxAndReportsWhatWasForgotten) {
+  const auto r = Fusionctl({"clear-box", "-1.5", "0", "0.25", "2", "3", "4.5"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out, "box cleared: 1234 voxels forgotten, version 2\n");
+  const v1::ClearBoxRequest& q = service_.last_clear_box;
+  EXPECT_EQ(q.min().x(), -1.5);
+  EXPECT_EQ(q.min().z(), 0.25);
+  EXPECT_EQ(q.max().y(), 3.0);
+  EXPECT_EQ(q.max().z(), 4.5);
+  EXPECT_EQ(Fusionctl({"clear-box", "0", "0", "0", "1", "1"}).exit_code, 2) << "five numbers";
+  EXPECT_EQ(Fusionctl({"clear-box", "0", "0", "0", "1", "1", "x"}).exit_code, 2);
 }
 
 TEST_F(FusionctlCallsTest, ErrorsNameTheStatusAndCarryTheDetail) {

@@ -64,6 +64,7 @@ class FakeFusionMap final : public v1::FusionMap::Service {
   grpc::Status points_status = grpc::Status::OK;
   std::chrono::milliseconds ray_delay{0};
   std::atomic<int> calls{0};
+  v1::ClearBoxRequest last_clear_box;  // the last ClearBox request (read after the call)
 
   // The "authorization" metadata of every call so far ("" when absent).
   std::vector<std::string> Authorizations() {
@@ -154,6 +155,17 @@ class FakeFusionMap final : public v1::FusionMap::Service {
                         v1::ResetMapResponse* r) override {
     Record(c);
     r->set_map_version(1);
+    return grpc::Status::OK;
+  }
+  grpc::Status ClearBox(grpc::ServerContext* c, const v1::ClearBoxRequest* q,
+                        v1::ClearBoxResponse* r) override {
+    Record(c);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      last_clear_box = *q;
+    }
+    r->set_map_version(2);
+    r->set_voxels_cleared(1234);
     return grpc::Status::OK;
   }
   grpc::Status SaveMap(grpc::ServerContext* c, const v1::SaveMapRequest*,

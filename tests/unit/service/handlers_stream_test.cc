@@ -1,6 +1,7 @@
-// FindPlanes, GetSnapshot and StreamUpdates handlers over an in-process channel
+// FindPlanes, GetSnapshot, StreamUpdates and ClearBox handlers over an in-process channel
 // (handler_fixture.h): the wall's plane, a snapshot that reads back as the map, update streams
-// that start with the whole map and follow it, and the bad arguments and limits of each.
+// that start with the whole map and follow it, a cleared box its followers are told of, and the
+// bad arguments and limits of each.
 #include <octomap/OcTree.h>
 
 #include <sstream>
@@ -170,6 +171,57 @@ TEST_F(HandlerTest, StreamUpdatesStartsWithTheWholeMapThenFollowsIt) {
   // The wall's voxels are told to be unknown now, or the whole (empty) map is sent again.
   EXPECT_TRUE(wall_unknown || (full && full_voxels == 0));
   context.TryCancel();
+}
+
+TEST_F(HandlerTest, ClearBoxForgetsTheBoxAndTellsTheFollowers) {
+  SeeWall(3);
+  const Eigen::Vector3d beside_box(0.6, 0.0, kWallZ);
+  ASSERT_EQ(StateAt(kOnWall), v1::VOXEL_STATE_OCCUPIED);
+  ASSERT_EQ(StateAt(beside_box), v1::VOXEL_STATE_OCCUPIED);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + 20s);
+  auto reader = stub_->StreamUpdates(&context, Text<v1::StreamUpdatesRequest>("since_version: 0"));
+  std::vector<v1::MapUpdate> updates;
+  ASSERT_TRUE(ReadBatch(reader.get(), &updates));
+
+  v1::ClearBoxResponse reply;
+  const auto status = Unary(&v1::FusionMap::Stub::ClearBox,
+                            Text<v1::ClearBoxRequest>("min { x: -0.3 y: -0.3 z: 1.9 } "
+                                                      "max { x: 0.3 y: 0.3 z: 2.2 }"),
+                            &reply);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_GT(reply.map_version(), updates.back().map_version());
+  EXPECT_GT(reply.voxels_cleared(), 0u);
+  EXPECT_EQ(StateAt(kOnWall), v1::VOXEL_STATE_UNKNOWN);
+  EXPECT_EQ(StateAt(beside_box), v1::VOXEL_STATE_OCCUPIED) << "outside the box";
+  EXPECT_EQ(StateAt(kInFront), v1::VOXEL_STATE_FREE) << "outside the box";
+  // The follower hears of it: the wall's voxels in the box are unknown now.
+  updates.clear();
+  while (updates.empty() || updates.back().map_version() < reply.map_version()) {
+    ASSERT_TRUE(ReadBatch(reader.get(), &updates));
+  }
+  bool told = false;
+  for (const auto& u : updates) {
+    for (const auto& v : u.voxels()) {
+      const Eigen::Vector3d c(v.center().x(), v.center().y(), v.center().z());
+      told |= v.state() == v1::VOXEL_STATE_UNKNOWN &&
+              ((c - kOnWall).cwiseAbs().array() <= v.size_m() / 2 + 1e-5).all();  // float centres
+    }
+  }
+  EXPECT_TRUE(told);
+  context.TryCancel();
+  SeeWall(2);  // the world is still there: new clouds map it again
+  EXPECT_EQ(StateAt(kOnWall), v1::VOXEL_STATE_OCCUPIED);
+}
+
+TEST_F(HandlerTest, ClearBoxRefusesBadBoxes) {
+  for (const char* bad : {"min { x: 1 } max { x: 0 }", "min { x: nan } max { x: 1 }",
+                          "min { x: 0 }", "max { x: 1 y: 1 z: 1 }"}) {
+    v1::ClearBoxResponse reply;
+    const auto status =
+        Unary(&v1::FusionMap::Stub::ClearBox, Text<v1::ClearBoxRequest>(bad), &reply);
+    EXPECT_EQ(status.error_code(), StatusCode::INVALID_ARGUMENT) << bad;
+  }
 }
 
 TEST_F(HandlerTest, StreamUpdatesRefusesSubscribersAboveTheLimit) {

@@ -39,6 +39,7 @@ TEST(SecurityTest, TokensFileLinesCommentsAndErrors) {
 TEST(SecurityTest, OnlyResetAndSaveNeedAdmin) {
   EXPECT_EQ(RequiredRole("/fusion.v1.FusionMap/ResetMap"), Role::kAdmin);
   EXPECT_EQ(RequiredRole("/fusion.v1.FusionMap/SaveMap"), Role::kAdmin);
+  EXPECT_EQ(RequiredRole("/fusion.v1.FusionMap/ClearBox"), Role::kAdmin);
   for (const char* method : {"/fusion.v1.FusionMap/QueryPoints", "/fusion.v1.FusionMap/GetSnapshot",
                              "/fusion.v1.FusionMap/StreamUpdates", "/grpc.health.v1.Health/Check",
                              ""}) {

@@ -12,6 +12,7 @@
 
 #include <octomap/OcTree.h>
 
+#include <Eigen/Geometry>
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -61,6 +62,12 @@ bool DeleteVoxel(octomap::OcTree& tree, const octomap::OcTreeKey& key);
 void ForEachInRegion(
     const octomap::OcTree& tree, const MapRegion& region,
     const std::function<void(const octomap::OcTreeKey&, unsigned, const octomap::OcTreeNode*)>& f);
+
+// The regions that tile the voxels whose centres lie in `box_world` (closed; world frame) where
+// `tree` has nodes: nodes wholly inside whole, coarse leaves across the box's faces split down
+// to the voxels along them. Ascending codes, disjoint; empty where the tree holds nothing.
+[[nodiscard]] std::vector<MapRegion> RegionsInBox(const octomap::OcTree& tree,
+                                                  const Eigen::AlignedBox3d& box_world);
 
 // Regions sorted by code, with every region that lies inside an earlier one dropped.
 void NormaliseRegions(std::vector<MapRegion>* regions);

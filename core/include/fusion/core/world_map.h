@@ -153,6 +153,13 @@ class WorldMap {
   // Clears the history, every live contribution and every period; the next publication is a
   // reset.
   void Reset();
+  // Forgets what the map knows in a box (world frame, closed; voxels whose centres lie in it
+  // become unknown), as octomap_server's clear_bbox: every live contribution is folded into the
+  // history first (CommitLive) and every sensor's period restarts (its beam grid would bring the
+  // box back), then the box is removed from the history and the map, and the next publication
+  // names the regions. A caller that keeps periods of its own (the service's worker, with the
+  // pieces above) folds and restarts those first. Returns the voxels forgotten.
+  std::uint64_t ClearBox(const Eigen::AlignedBox3d& box_world);
   // Publishes the map if it changed since the last publication (a new version), else returns
   // the last one again.
   Publication Publish();

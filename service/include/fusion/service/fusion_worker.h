@@ -79,6 +79,12 @@ class FusionWorker {
   // Clears the map and every beam grid; returns the new version. Waits for the current
   // integration and render steps.
   std::uint64_t Reset();
+  // Forgets a box of the map (world frame; docs/service.md, ClearBox): every sensor's open
+  // period is sealed and, with those waiting, committed, so that all evidence integrated before
+  // the call is in the history; then the box is removed from it and the map is published.
+  // Clouds integrated meanwhile start new periods. Sets *voxels to the voxels forgotten; returns
+  // the new version.
+  std::uint64_t ClearBox(const Eigen::AlignedBox3d& box_world, std::uint64_t* voxels);
   // beam: an index, or row/col when std::nullopt. The open period's beam grid.
   BeamLookup InspectBeam(const std::string& sensor_id, std::optional<std::size_t> beam,
                          std::size_t row, std::size_t col, BeamInspection* out) const;

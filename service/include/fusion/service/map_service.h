@@ -67,6 +67,9 @@ class MapService final : public fusion::v1::FusionMap::CallbackService {
   grpc::ServerUnaryReactor* ResetMap(grpc::CallbackServerContext* context,
                                      const fusion::v1::ResetMapRequest* request,
                                      fusion::v1::ResetMapResponse* reply) override;
+  grpc::ServerUnaryReactor* ClearBox(grpc::CallbackServerContext* context,
+                                     const fusion::v1::ClearBoxRequest* request,
+                                     fusion::v1::ClearBoxResponse* reply) override;
   grpc::ServerUnaryReactor* SaveMap(grpc::CallbackServerContext* context,
                                     const fusion::v1::SaveMapRequest* request,
                                     fusion::v1::SaveMapResponse* reply) override;

@@ -7,7 +7,7 @@
 #include <grpcpp/grpcpp.h>
 #include <octomap/OcTreeKey.h>
 
-#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cstdint>
 #include <set>
 #include <string>
@@ -40,6 +40,9 @@ struct BoxQuery {
 [[nodiscard]] grpc::Status CheckFindPlanes(const fusion::v1::FindPlanesRequest& request);
 [[nodiscard]] grpc::Status CheckInspectBeam(const fusion::v1::InspectBeamRequest& request);
 [[nodiscard]] grpc::Status CheckGetSnapshot(const fusion::v1::GetSnapshotRequest& request);
+// Finite corners, min <= max; *box (world frame) receives the box.
+[[nodiscard]] grpc::Status CheckClearBox(const fusion::v1::ClearBoxRequest& request,
+                                         Eigen::AlignedBox3d* box);
 
 // QueryBox page tokens: the key after which the next page starts.
 [[nodiscard]] std::string EncodePageToken(const octomap::OcTreeKey& key);
