@@ -70,8 +70,8 @@ class FusiondDdsSecurityTest : public E2eService {
   // Runs make_dds_security.sh DIR SENSOR; returns its exit code, its stderr in *error.
   int MakeSecurity(const std::string& dir, const std::string& sensor, std::string* error) {
     const std::string err = dir_ + "/make_dds_security.err";
-    const std::string command = kRepoDir + "/scripts/make_dds_security.sh '" + dir + "' " +
-                                sensor + " > /dev/null 2> '" + err + "'";
+    const std::string command = kRepoDir + "/scripts/make_dds_security.sh '" + dir + "' " + sensor +
+                                " > /dev/null 2> '" + err + "'";
     const int status = std::system(command.c_str());
     *error = ReadFile(err);
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -150,8 +150,8 @@ TEST_F(FusiondDdsSecurityTest, AuthorisedSensorIsIntegratedOthersAreNot) {
   std::string out;
   EXPECT_EQ(Finish(*authorised, &out), 0) << out;
   EXPECT_NE(out.find(published), std::string::npos) << out;
-  EXPECT_EQ(out.find(no_reader), std::string::npos) << "the authorised sensor matched no reader: "
-                                                    << out;
+  EXPECT_EQ(out.find(no_reader), std::string::npos)
+      << "the authorised sensor matched no reader: " << out;
   for (auto* refused : {plain.get(), foreign_ca.get()}) {
     EXPECT_EQ(Finish(*refused, &out), 0) << out;
     EXPECT_NE(out.find(no_reader), std::string::npos) << "a refused publisher matched: " << out;
