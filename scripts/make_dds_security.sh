@@ -10,6 +10,8 @@
 #   dds_NAME.xml             the complete Cyclone configuration of NAME: the loopback settings of
 #                            fusiond's embedded one plus the security plugins and these files;
 #                            run NAME with CYCLONEDDS_URI=file://DIR/dds_NAME.xml
+#   security_NAME.xml        the security part alone, to list after another configuration:
+#                            CYCLONEDDS_URI=file:///OTHER.xml,file://DIR/security_NAME.xml
 # Usage: scripts/make_dds_security.sh DIR [SENSOR...]   (default sensor: "sensor")
 #   FUSION_DDS_TOPIC        the points topic (default fusion/points)
 #   FUSION_DDS_SECURITY_LIB the folder of libdds_security_{auth,ac,crypto}.so (default: Debian's
@@ -131,19 +133,9 @@ EOF
 make_permissions fusiond subscribe
 for name in "${sensors[@]}"; do make_permissions "$name" publish; done
 
-# ---- one complete Cyclone configuration per identity ---------------------------------------------
-# The loopback settings are those of kLoopbackDdsConfig (idl/src/participant.cc): keep them equal.
-make_config() {  # make_config NAME
-  cat > "$dir/dds_$1.xml" << EOF
-<CycloneDDS xmlns="https://cdds.io/config"><Domain id="any">
- <General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>
-  <AllowMulticast>false</AllowMulticast>
-  <MaxMessageSize>65500B</MaxMessageSize><FragmentSize>65000B</FragmentSize></General>
- <Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>50</MaxAutoParticipantIndex>
-  <Peers><Peer address="127.0.0.1"/></Peers></Discovery>
- <Internal><SocketReceiveBufferSize min="4MB"/>
-  <DefragReliableMaxSamples>4</DefragReliableMaxSamples>
-  <DefragUnreliableMaxSamples>2</DefragUnreliableMaxSamples></Internal>
+# ---- Cyclone configurations per identity ---------------------------------------------------------
+security_block() {  # security_block NAME: the <Security> element of NAME
+  cat << EOF
  <Security>
   <Authentication>
    <Library path="$lib/libdds_security_auth.so" initFunction="init_authentication" finalizeFunction="finalize_authentication"/>
@@ -161,8 +153,32 @@ make_config() {  # make_config NAME
    <Library path="$lib/libdds_security_crypto.so" initFunction="init_crypto" finalizeFunction="finalize_crypto"/>
   </Cryptographic>
  </Security>
-</Domain></CycloneDDS>
 EOF
+}
+# The loopback settings are those of kLoopbackDdsConfig (idl/src/participant.cc): keep them equal
+# (a test compares them).
+make_config() {  # make_config NAME
+  {
+    cat << EOF
+<CycloneDDS xmlns="https://cdds.io/config"><Domain id="any">
+ <General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>
+  <AllowMulticast>false</AllowMulticast>
+  <MaxMessageSize>65500B</MaxMessageSize><FragmentSize>65000B</FragmentSize></General>
+ <Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>50</MaxAutoParticipantIndex>
+  <Peers><Peer address="127.0.0.1"/></Peers></Discovery>
+ <Internal><SocketReceiveBufferSize min="4MB"/>
+  <DefragReliableMaxSamples>4</DefragReliableMaxSamples>
+  <DefragUnreliableMaxSamples>2</DefragUnreliableMaxSamples></Internal>
+EOF
+    security_block "$1"
+    echo '</Domain></CycloneDDS>'
+  } > "$dir/dds_$1.xml"
+  # The security alone, to list after another network configuration (Cyclone merges the list).
+  {
+    echo '<CycloneDDS xmlns="https://cdds.io/config"><Domain id="any">'
+    security_block "$1"
+    echo '</Domain></CycloneDDS>'
+  } > "$dir/security_$1.xml"
 }
 for name in fusiond "${sensors[@]}"; do make_config "$name"; done
 chmod 644 "$dir"/*.pem "$dir"/*.xml "$dir"/*.p7s

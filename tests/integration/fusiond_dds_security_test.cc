@@ -190,12 +190,18 @@ TEST_F(FusiondDdsSecurityTest, WithoutSecurityTheSamePublisherIsIntegrated) {
   EXPECT_EQ(fusiond_->Stop(SIGTERM, 10s), 0);
 }
 
-// The configurations the script writes keep fusiond's embedded loopback settings exactly.
+// The configurations the script writes keep fusiond's embedded loopback settings exactly; the
+// security-only files hold the same <Security> block.
 TEST_F(FusiondDdsSecurityTest, ScriptKeepsTheLoopbackSettings) {
+  const std::regex security(R"(\s*<Security>[\s\S]*</Security>)");
   for (const std::string identity : {"fusiond", "sr3000"}) {
     std::string xml = ReadFile(Uri(identity));
-    ASSERT_NE(xml.find("<Security>"), std::string::npos) << identity;
-    xml = std::regex_replace(xml, std::regex(R"(\s*<Security>[\s\S]*</Security>)"), "");
+    std::smatch block, alone;
+    const std::string only = ReadFile(trusted_ + "/security_" + identity + ".xml");
+    ASSERT_TRUE(std::regex_search(xml, block, security)) << identity;
+    ASSERT_TRUE(std::regex_search(only, alone, security)) << identity;
+    EXPECT_EQ(block.str(), alone.str()) << identity;
+    xml = std::regex_replace(xml, security, "");
     xml = std::regex_replace(xml, std::regex(R"(\n\s*)"), "");
     EXPECT_EQ(xml, fusion::dds::kLoopbackDdsConfig) << identity;
   }
