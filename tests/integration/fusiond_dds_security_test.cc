@@ -207,12 +207,17 @@ TEST_F(FusiondDdsSecurityTest, ScriptKeepsTheLoopbackSettings) {
   }
 }
 
-TEST_F(FusiondDdsSecurityTest, ScriptRefusesToOverwriteAndBadNames) {
+TEST_F(FusiondDdsSecurityTest, ScriptRefusesAnExistingCaBadNamesAndMissingPlugins) {
   std::string error;
   EXPECT_EQ(MakeSecurity(trusted_, "sr3000", &error), 1);
   EXPECT_NE(error.find("identity_ca.key exists"), std::string::npos) << error;
   EXPECT_EQ(MakeSecurity(dir_ + "/other", "'bad name'", &error), 2);
   EXPECT_NE(error.find("bad identity name 'bad name'"), std::string::npos) << error;
+  EXPECT_FALSE(fs::exists(dir_ + "/other/identity_ca.key"));
+  ASSERT_EQ(setenv("FUSION_DDS_SECURITY_LIB", "/nonexistent", 1), 0);
+  EXPECT_EQ(MakeSecurity(dir_ + "/other", "sr3000", &error), 1);
+  unsetenv("FUSION_DDS_SECURITY_LIB");
+  EXPECT_NE(error.find("no /nonexistent/libdds_security_auth.so"), std::string::npos) << error;
   EXPECT_FALSE(fs::exists(dir_ + "/other/identity_ca.key"));
 }
 
