@@ -63,6 +63,8 @@ int Stats(Context& ctx, const Args&) {
   row("clouds_rejected", s.clouds_rejected());
   std::printf("rejected_by_reason%s\n", s.rejected_by_reason().empty() ? "   -" : "");
   PrintByReason(s.rejected_by_reason(), "  ");
+  row("matched_writers", s.matched_writers());
+  row("matched_writers_total", s.matched_writers_total());
   row("renders", s.renders());
   row("snapshots_saved", s.snapshots_saved());
   row("snapshots_failed", s.snapshots_failed());

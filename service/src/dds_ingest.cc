@@ -58,7 +58,10 @@ Status DdsIngest::Start(dds_entity_t participant) {
     dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 1);
   }
   dds_qset_durability(qos, DDS_DURABILITY_VOLATILE);
-  reader_ = dds_create_reader(participant, topic_, qos, nullptr);
+  dds_listener_t* listener = dds_create_listener(this);
+  dds_lset_subscription_matched(listener, &DdsIngest::OnWritersMatched);
+  reader_ = dds_create_reader(participant, topic_, qos, listener);
+  dds_delete_listener(listener);
   dds_delete_qos(qos);
   if (reader_ < 0) {
     return Status::Error(DdsError("dds_create_reader", reader_));
@@ -136,6 +139,15 @@ bool DdsIngest::AcceptSensor(const void* sample, void* self) {
   ingest->queues_->CountRejected(sensor_id, *reason);
   ingest->LogRejection(*reason, sensor_id, detail);
   return false;
+}
+
+void DdsIngest::OnWritersMatched(dds_entity_t, const dds_subscription_matched_status_t status,
+                                 void* self) {
+  MatchedWriters& matched = static_cast<DdsIngest*>(self)->queues_->matched_writers();
+  matched.current = status.current_count;
+  matched.total = status.total_count;
+  spdlog::info("ingest: {} DDS writer(s) matched ({} since the start)", status.current_count,
+               status.total_count);
 }
 
 void DdsIngest::Handle(const fusion_dds_PointCloud& sample) {

@@ -56,6 +56,8 @@ grpc::ServerUnaryReactor* MapService::GetStats(grpc::CallbackServerContext* cont
     if (state_->persister->failing())
       reply->set_last_snapshot_error(state_->persister->last_error());
     reply->set_last_snapshot_path(state_->persister->path());
+    reply->set_matched_writers(state_->queues->matched_writers().current.load());
+    reply->set_matched_writers_total(state_->queues->matched_writers().total.load());
     for (std::size_t i = 0; i < kRejectReasonCount; ++i) {
       const auto n = rejected.by_reason[i].load();
       if (n > 0) (*reply->mutable_rejected_by_reason())[RejectReasonName(RejectReason(i))] = n;

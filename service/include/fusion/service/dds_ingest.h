@@ -44,6 +44,9 @@ class DdsIngest {
   // The topic filter: false (counted, logged) for a sample whose sensor id is empty or not
   // configured, before the reader keeps an instance for it. Runs on DDS's receive threads.
   static bool AcceptSensor(const void* sample, void* self);
+  // The reader's listener: counts the writers matched (MatchedWriters). On DDS's threads.
+  static void OnWritersMatched(dds_entity_t reader, dds_subscription_matched_status_t status,
+                               void* self);
   void Handle(const fusion_dds_PointCloud& sample);
   void LogRejection(RejectReason reason, const std::string& sensor_id, const std::string& detail);
 

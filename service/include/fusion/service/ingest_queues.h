@@ -43,6 +43,12 @@ struct SensorCountersAtomic {
   RejectCounters rejected;
 };
 
+// DDS writers matched with the points reader (the DDS ingest updates them).
+struct MatchedWriters {
+  std::atomic<std::uint32_t> current{0};
+  std::atomic<std::uint64_t> total{0};  // since the start
+};
+
 class IngestQueues {
  public:
   // (sensor id, queue depth >= 1) for every configured sensor. The queues together hold at
@@ -60,6 +66,8 @@ class IngestQueues {
   [[nodiscard]] RejectCounters& all_rejected() { return all_rejected_; }
   [[nodiscard]] const RejectCounters& all_rejected() const { return all_rejected_; }
   void CountRejected(const std::string& sensor_id, RejectReason reason);
+  [[nodiscard]] MatchedWriters& matched_writers() { return matched_writers_; }
+  [[nodiscard]] const MatchedWriters& matched_writers() const { return matched_writers_; }
 
   // Queues a validated cloud of a known sensor. With `stop` null, a full queue (its depth, or
   // the byte bound) drops its oldest cloud (counted). Otherwise Push waits while it is full;
@@ -87,6 +95,7 @@ class IngestQueues {
   std::size_t max_queued_bytes_ = 0;
   std::size_t queued_bytes_ = 0;  // under mutex_
   RejectCounters all_rejected_;
+  MatchedWriters matched_writers_;
   mutable std::mutex mutex_;
   std::condition_variable cv_;        // clouds queued (or Wake)
   std::condition_variable space_cv_;  // clouds taken
