@@ -33,7 +33,9 @@ Usage: fusion-sim-sensor --preset sr3000|stoc [options]
   --preset NAME        sensor model: sr3000 (time of flight) or stoc (stereo), paper Table I
   --sensor-id ID       id on the wire (default: the preset name)
   --scene paper-board|FILE  scene to ray-cast (default paper-board: the paper's Fig. 5 board
-                       and floor; FILE: the scene format of core/sim/include/fusion/sim/scene.h)
+                       and floor; FILE: the scene format of core/sim/include/fusion/sim/scene.h;
+                       objects with from / until / path move on the tool's clock, seconds
+                       since the first frame, like --waypoints)
   --pose x,y,z[,yaw_deg,pitch_deg]  sensor position in the world (metres), looking along +x
                        rotated by yaw (left) and pitch (down) (default: the paper's mounting)
   --waypoints FILE     moving sensor: lines "t_s x y z yaw_deg pitch_deg", linearly
@@ -282,7 +284,7 @@ Status PublishFrames(const Options& o, const fusion::sim::SensorRun& run,
     const double t_s = std::chrono::duration<double>(Clock::now() - start).count();
     const Eigen::Isometry3d T_world_sensor =
         waypoints.empty() ? run.T_world_sensor : PoseOf(Interpolate(waypoints, t_s));
-    ToCloud(o, k, T_world_sensor, simulator->Capture(T_world_sensor), &cloud);
+    ToCloud(o, k, T_world_sensor, simulator->Capture(T_world_sensor, t_s), &cloud);
     if (Status s = writer->Write(cloud); !s.ok()) return s;
     ++*published;
     const auto now = Clock::now();

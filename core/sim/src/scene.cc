@@ -118,6 +118,43 @@ void Scene::AddRectangle(const Rectangle& rectangle) {
 
 void Scene::AddBox(const Box& box) { boxes_.push_back(box); }
 
+Eigen::Vector3d Motion::CentreAt(double t_s, const Eigen::Vector3d& fixed) const {
+  if (path.empty()) return fixed;
+  if (t_s <= path.front().first) return path.front().second;
+  for (std::size_t i = 1; i < path.size(); ++i) {
+    if (t_s <= path[i].first) {
+      const double w = (t_s - path[i - 1].first) / (path[i].first - path[i - 1].first);
+      return (1.0 - w) * path[i - 1].second + w * path[i].second;
+    }
+  }
+  return path.back().second;
+}
+
+bool Scene::IsDynamic() const {
+  for (const Rectangle& r : rectangles_) {
+    if (!r.motion.IsStatic()) return true;
+  }
+  for (const Box& b : boxes_) {
+    if (!b.motion.IsStatic()) return true;
+  }
+  return false;
+}
+
+Scene Scene::At(double t_s) const {
+  Scene now;
+  for (Rectangle r : rectangles_) {
+    if (!r.motion.PresentAt(t_s)) continue;
+    r.center_m = r.motion.CentreAt(t_s, r.center_m);
+    now.rectangles_.push_back(std::move(r));
+  }
+  for (Box b : boxes_) {
+    if (!b.motion.PresentAt(t_s)) continue;
+    b.T_world_box.translation() = b.motion.CentreAt(t_s, b.T_world_box.translation());
+    now.boxes_.push_back(std::move(b));
+  }
+  return now;
+}
+
 std::optional<RayHit> Scene::Raycast(const Eigen::Vector3d& origin_m,
                                      const Eigen::Vector3d& direction, double max_range_m) const {
   std::optional<RayHit> best;
@@ -167,15 +204,108 @@ bool Scene::SurfaceIntersects(const Eigen::AlignedBox3d& box_m) const {
   return false;
 }
 
+namespace {
+
+bool ParseNumber(const std::string& token, double* x) {
+  char* end = nullptr;
+  *x = std::strtod(token.c_str(), &end);
+  return end != token.c_str() && *end == '\0' && std::isfinite(*x);
+}
+
+// An object line after its kind and name: the numbers, then the keywords (untextured, from,
+// until, path). Returns an error message, empty when the line is well formed.
+struct ObjectLine {
+  std::vector<double> numbers;
+  bool textured = true;
+  Motion motion;
+};
+
+std::string ParseObjectTail(const std::vector<std::string>& tokens, ObjectLine* out) {
+  std::size_t i = 2;
+  for (double x = 0.0; i < tokens.size() && ParseNumber(tokens[i], &x); ++i) out->numbers.push_back(x);
+  while (i < tokens.size()) {
+    const std::string& key = tokens[i++];
+    double x = 0.0;
+    if (key == "untextured") {
+      out->textured = false;
+    } else if (key == "from" || key == "until") {
+      if (i >= tokens.size() || !ParseNumber(tokens[i], &x)) return key + " needs a time (s)";
+      (key == "from" ? out->motion.from_s : out->motion.until_s) = x;
+      ++i;
+    } else if (key == "path") {
+      for (; i + 3 < tokens.size() && ParseNumber(tokens[i], &x); i += 4) {
+        Eigen::Vector3d c;
+        for (int a = 0; a < 3; ++a) {
+          if (!ParseNumber(tokens[i + 1 + a], &c[a])) return "path needs T X Y Z per waypoint";
+        }
+        if (!out->motion.path.empty() && x <= out->motion.path.back().first) {
+          return "path times must ascend";
+        }
+        out->motion.path.emplace_back(x, c);
+      }
+      if (out->motion.path.empty()) return "path needs T X Y Z per waypoint";
+    } else {
+      double unused = 0.0;
+      return ParseNumber(key, &unused) ? "too many numbers, or a path waypoint cut short"
+                                       : "not a finite number or keyword: '" + key + "'";
+    }
+  }
+  if (!(out->motion.from_s < out->motion.until_s)) return "from must come before until";
+  return "";
+}
+
+std::string AddRect(const std::string& name, const ObjectLine& line, Scene* scene) {
+  const std::vector<double>& v = line.numbers;
+  if (v.size() != 11) return "rect needs: NAME cx cy cz ux uy uz vx vy vz size_u size_v [untextured]";
+  Rectangle r;
+  r.name = name;
+  r.center_m = {v[0], v[1], v[2]};
+  r.axis_u = {v[3], v[4], v[5]};
+  r.axis_v = {v[6], v[7], v[8]};
+  if (r.axis_u.norm() < 1e-9 || r.axis_v.norm() < 1e-9 ||
+      r.axis_u.normalized().cross(r.axis_v.normalized()).norm() < 1e-6) {
+    return "rect axes must be non-zero and not parallel";
+  }
+  if (v[9] <= 0.0 || v[10] <= 0.0) return "rect sizes must be positive";
+  r.half_u_m = v[9] / 2.0;
+  r.half_v_m = v[10] / 2.0;
+  r.textured = line.textured;
+  r.motion = line.motion;
+  scene->AddRectangle(r);
+  return "";
+}
+
+std::string AddBox(const std::string& name, const ObjectLine& line, Scene* scene) {
+  const std::vector<double>& v = line.numbers;
+  if (v.size() != 6 && v.size() != 9) {
+    return "box needs: NAME cx cy cz sx sy sz [roll pitch yaw] [untextured]";
+  }
+  Box b;
+  b.name = name;
+  if (v[3] <= 0.0 || v[4] <= 0.0 || v[5] <= 0.0) return "box sizes must be positive";
+  b.half_extents_m = Eigen::Vector3d(v[3], v[4], v[5]) / 2.0;
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  if (v.size() == 9) {
+    R = (Eigen::AngleAxisd(v[8] * kDegToRad, Eigen::Vector3d::UnitZ()) *
+         Eigen::AngleAxisd(v[7] * kDegToRad, Eigen::Vector3d::UnitY()) *
+         Eigen::AngleAxisd(v[6] * kDegToRad, Eigen::Vector3d::UnitX()))
+            .toRotationMatrix();
+  }
+  b.T_world_box.linear() = R;
+  b.T_world_box.translation() = Eigen::Vector3d(v[0], v[1], v[2]);
+  b.textured = line.textured;
+  b.motion = line.motion;
+  scene->AddBox(b);
+  return "";
+}
+
+}  // namespace
+
 std::optional<Scene> ParseScene(const std::string& text, std::string* error) {
   Scene scene;
   std::istringstream lines(text);
   std::string line;
   int line_number = 0;
-  auto fail = [&](const std::string& message) -> std::optional<Scene> {
-    if (error != nullptr) *error = "line " + std::to_string(line_number) + ": " + message;
-    return std::nullopt;
-  };
   while (std::getline(lines, line)) {
     ++line_number;
     const auto hash = line.find('#');
@@ -184,61 +314,19 @@ std::optional<Scene> ParseScene(const std::string& text, std::string* error) {
     std::vector<std::string> tokens;
     for (std::string t; in >> t;) tokens.push_back(t);
     if (tokens.empty()) continue;
-    bool textured = true;
-    if (tokens.back() == "untextured") {
-      textured = false;
-      tokens.pop_back();
+    std::string why;
+    ObjectLine object;
+    if (tokens[0] != "rect" && tokens[0] != "box") {
+      why = "unknown object '" + tokens[0] + "' (expected rect or box)";
+    } else if (tokens.size() < 2) {
+      why = tokens[0] + " needs a NAME";
+    } else if (why = ParseObjectTail(tokens, &object); why.empty()) {
+      why = tokens[0] == "rect" ? AddRect(tokens[1], object, &scene)
+                                : AddBox(tokens[1], object, &scene);
     }
-    std::vector<double> v;
-    for (std::size_t i = 2; i < tokens.size(); ++i) {
-      char* end = nullptr;
-      const double x = std::strtod(tokens[i].c_str(), &end);
-      if (end == tokens[i].c_str() || *end != '\0' || !std::isfinite(x)) {
-        return fail("not a finite number: '" + tokens[i] + "'");
-      }
-      v.push_back(x);
-    }
-    if (tokens[0] == "rect") {
-      if (tokens.size() < 2 || v.size() != 11) {
-        return fail(
-            "rect needs: NAME cx cy cz ux uy uz vx vy vz size_u size_v "
-            "[untextured]");
-      }
-      Rectangle r;
-      r.name = tokens[1];
-      r.center_m = {v[0], v[1], v[2]};
-      r.axis_u = {v[3], v[4], v[5]};
-      r.axis_v = {v[6], v[7], v[8]};
-      if (r.axis_u.norm() < 1e-9 || r.axis_v.norm() < 1e-9 ||
-          r.axis_u.normalized().cross(r.axis_v.normalized()).norm() < 1e-6) {
-        return fail("rect axes must be non-zero and not parallel");
-      }
-      if (v[9] <= 0.0 || v[10] <= 0.0) return fail("rect sizes must be positive");
-      r.half_u_m = v[9] / 2.0;
-      r.half_v_m = v[10] / 2.0;
-      r.textured = textured;
-      scene.AddRectangle(r);
-    } else if (tokens[0] == "box") {
-      if (tokens.size() < 2 || (v.size() != 6 && v.size() != 9)) {
-        return fail("box needs: NAME cx cy cz sx sy sz [roll pitch yaw] [untextured]");
-      }
-      Box b;
-      b.name = tokens[1];
-      if (v[3] <= 0.0 || v[4] <= 0.0 || v[5] <= 0.0) return fail("box sizes must be positive");
-      b.half_extents_m = Eigen::Vector3d(v[3], v[4], v[5]) / 2.0;
-      Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-      if (v.size() == 9) {
-        R = (Eigen::AngleAxisd(v[8] * kDegToRad, Eigen::Vector3d::UnitZ()) *
-             Eigen::AngleAxisd(v[7] * kDegToRad, Eigen::Vector3d::UnitY()) *
-             Eigen::AngleAxisd(v[6] * kDegToRad, Eigen::Vector3d::UnitX()))
-                .toRotationMatrix();
-      }
-      b.T_world_box.linear() = R;
-      b.T_world_box.translation() = Eigen::Vector3d(v[0], v[1], v[2]);
-      b.textured = textured;
-      scene.AddBox(b);
-    } else {
-      return fail("unknown object '" + tokens[0] + "' (expected rect or box)");
+    if (!why.empty()) {
+      if (error != nullptr) *error = "line " + std::to_string(line_number) + ": " + why;
+      return std::nullopt;
     }
   }
   return scene;

@@ -14,7 +14,10 @@ RangeSimulator::RangeSimulator(Scene scene, SensorSpec spec, const SimOptions& o
       tessellation_(spec_),
       rng_(options.seed) {}
 
-OrganizedCloud RangeSimulator::Capture(const Eigen::Isometry3d& T_world_sensor) {
+OrganizedCloud RangeSimulator::Capture(const Eigen::Isometry3d& T_world_sensor, double t_s) {
+  const std::optional<Scene> now =
+      scene_.IsDynamic() ? std::optional<Scene>(scene_.At(t_s)) : std::nullopt;
+  const Scene& scene = now ? *now : scene_;
   OrganizedCloud cloud;
   cloud.rows = tessellation_.rows();
   cloud.cols = tessellation_.cols();
@@ -34,7 +37,7 @@ OrganizedCloud RangeSimulator::Capture(const Eigen::Isometry3d& T_world_sensor) 
     const double noise = normal(rng_);
     const double drop = uniform(rng_);
     if (drop < options_.dropout_probability) continue;
-    const auto hit = scene_.Raycast(origin, R * dir, spec_.r_max_m);
+    const auto hit = scene.Raycast(origin, R * dir, spec_.r_max_m);
     auto set_beyond = [&] {
       if (!options_.flag_beyond_range) return;
       cloud.beyond_range[b] = 1;

@@ -88,6 +88,66 @@ TEST(SceneFile, ParsesAndRejects) {
   std::remove(path.c_str());
 }
 
+TEST(SceneFile, ObjectsAppearDisappearAndMoveAlongTheirPath) {
+  std::string error;
+  const auto scene = ParseScene(
+      "rect wall 3 0 1  0 1 0  0 0 1  4 2\n"
+      "box person 2 1 0.5  0.4 0.4 1.0  path 0 2 1 0.5  2 2 -1 0.5\n"
+      "box crate 1.5 0 0.25  0.5 0.5 0.5  from 1 until 3 untextured\n",
+      &error);
+  ASSERT_TRUE(scene.has_value()) << error;
+  EXPECT_TRUE(scene->IsDynamic());
+  EXPECT_FALSE(PaperBoardScene().IsDynamic());
+  const auto centres = [](const Scene& s) {
+    std::vector<Eigen::Vector3d> c;
+    for (const Box& b : s.boxes()) c.push_back(b.T_world_box.translation());
+    return c;
+  };
+  const Scene before = scene->At(-1.0), early = scene->At(0.5), middle = scene->At(1.0),
+              late = scene->At(3.0);
+  ASSERT_EQ(before.boxes().size(), 1u) << "the crate appears at 1 s";
+  EXPECT_TRUE(centres(before)[0].isApprox(Eigen::Vector3d(2, 1, 0.5))) << "held before the path";
+  ASSERT_EQ(early.boxes().size(), 1u);
+  EXPECT_TRUE(centres(early)[0].isApprox(Eigen::Vector3d(2, 0.5, 0.5))) << "a quarter of the way";
+  ASSERT_EQ(middle.boxes().size(), 2u);
+  EXPECT_TRUE(centres(middle)[0].isApprox(Eigen::Vector3d(2, 0, 0.5)));
+  EXPECT_FALSE(middle.boxes()[1].textured);
+  ASSERT_EQ(late.boxes().size(), 1u) << "the crate is gone from 3 s";
+  EXPECT_TRUE(centres(late)[0].isApprox(Eigen::Vector3d(2, -1, 0.5))) << "held after the path";
+  EXPECT_EQ(late.rectangles().size(), 1u) << "static objects stay";
+  // A beam along +x at the person's height meets the person only while it crosses y = 0.
+  const Eigen::Vector3d origin(0, 0, 0.5), along_x(1, 0, 0);
+  EXPECT_NEAR(middle.Raycast(origin, along_x, 10.0)->range_m, 1.25, 1e-9) << "the crate first";
+  EXPECT_NEAR(scene->At(2.5).Raycast(origin, along_x, 10.0)->range_m, 1.25, 1e-9);
+  EXPECT_NEAR(scene->At(0.9).Raycast(origin, along_x, 10.0)->range_m, 1.8, 1e-9) << "the person";
+  EXPECT_NEAR(late.Raycast(origin, along_x, 10.0)->range_m, 3.0, 1e-9) << "the wall";
+
+  for (const char* bad : {"box b 0 0 0 1 1 1 from\n", "box b 0 0 0 1 1 1 from 2 until 1\n",
+                          "box b 0 0 0 1 1 1 path 1 0 0 0 0.5 1 1 1\n",
+                          "box b 0 0 0 1 1 1 path 1 0 0\n", "box b 0 0 0 1 1 1 spin 3\n"}) {
+    EXPECT_FALSE(ParseScene(bad, &error).has_value()) << bad;
+    EXPECT_NE(error.find("line 1"), std::string::npos) << error;
+  }
+}
+
+TEST(Simulator, CapturesTheSceneAsItIsAtTheFramesTime) {
+  SimOptions options;
+  options.add_noise = false;
+  const SensorSpec spec = WithTessellation(*SensorPreset("sr3000"), 22, 18);
+  std::string error;
+  const auto scene = ParseScene(
+      "rect wall 3 0 0  0 1 0  0 0 1  6 4\nbox crate 1.5 0 0  0.6 0.6 0.6  until 1\n", &error);
+  ASSERT_TRUE(scene.has_value()) << error;
+  RangeSimulator sim(*scene, spec, options);
+  const Eigen::Isometry3d pose = ForwardLookingPose(Eigen::Vector3d::Zero());
+  const auto centre_range = [&](const OrganizedCloud& c) {
+    const std::size_t b = static_cast<std::size_t>(9 * 22 + 11);
+    return c.true_range_m[b];
+  };
+  EXPECT_LT(centre_range(sim.Capture(pose, 0.5)), 1.5f) << "the crate, 1.2 m ahead";
+  EXPECT_GT(centre_range(sim.Capture(pose, 1.0)), 2.9f) << "the crate is gone: the wall";
+}
+
 TEST(Simulator, NoiseFreeCloudIsExactInTheSensorFrame) {
   SimOptions options;
   options.add_noise = false;

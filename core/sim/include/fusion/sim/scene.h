@@ -10,14 +10,37 @@
 // A rect spans size_u along u and size_v along v around its centre (v is made
 // orthogonal to u); a box is rotated by R = Rz(yaw) Ry(pitch) Rx(roll).
 // "untextured" surfaces give no returns to sensors that need texture (stereo).
+// Dynamic scenes: after the numbers, any of
+//   from T            the object appears at scene time T (seconds)
+//   until T           and is gone from T on
+//   path T X Y Z ...  its centre at those times (ascending), linear in between,
+//                     held before the first and after the last
+// e.g. "box person 2 1 0.45  0.4 0.4 1.7  path 0 2 1 0.45  2 2 -1 0.45" walks
+// 2 m across the view in 2 s.
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cmath>
+#include <limits>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace fusion::sim {
+
+// When an object exists and where its centre is (scene time, seconds).
+struct Motion {
+  double from_s = -std::numeric_limits<double>::infinity();
+  double until_s = std::numeric_limits<double>::infinity();
+  std::vector<std::pair<double, Eigen::Vector3d>> path;  // (t_s, centre_m), t ascending
+
+  [[nodiscard]] bool IsStatic() const { return path.empty() && !std::isfinite(from_s) &&
+                                               !std::isfinite(until_s); }
+  [[nodiscard]] bool PresentAt(double t_s) const { return t_s >= from_s && t_s < until_s; }
+  // The centre at t_s, or `fixed` without a path.
+  [[nodiscard]] Eigen::Vector3d CentreAt(double t_s, const Eigen::Vector3d& fixed) const;
+};
 
 struct Rectangle {
   std::string name;
@@ -27,6 +50,7 @@ struct Rectangle {
   double half_u_m = 0.5;
   double half_v_m = 0.5;
   bool textured = true;
+  Motion motion;
   [[nodiscard]] Eigen::Vector3d Normal() const { return axis_u.cross(axis_v).normalized(); }
 };
 
@@ -35,6 +59,7 @@ struct Box {
   Eigen::Isometry3d T_world_box = Eigen::Isometry3d::Identity();
   Eigen::Vector3d half_extents_m = Eigen::Vector3d::Constant(0.5);
   bool textured = true;
+  Motion motion;
 };
 
 struct RayHit {
@@ -50,6 +75,11 @@ class Scene {
   [[nodiscard]] const std::vector<Rectangle>& rectangles() const { return rectangles_; }
   [[nodiscard]] const std::vector<Box>& boxes() const { return boxes_; }
   [[nodiscard]] bool empty() const { return rectangles_.empty() && boxes_.empty(); }
+  // Whether some object appears, disappears or moves.
+  [[nodiscard]] bool IsDynamic() const;
+  // The scene as it is at scene time t_s: the objects present then, at their centres then
+  // (static objects as they are). Object indices (RayHit::object) refer to this scene.
+  [[nodiscard]] Scene At(double t_s) const;
 
   // First surface along origin + t * direction (direction unit, world frame), t
   // in (0, max_range_m]; std::nullopt if none.

@@ -47,8 +47,9 @@ class RangeSimulator {
   [[nodiscard]] const SensorSpec& spec() const { return spec_; }
   [[nodiscard]] const BeamTessellation& tessellation() const { return tessellation_; }
   [[nodiscard]] const Scene& scene() const { return scene_; }
-  // One frame taken at T_world_sensor (sensor optical frame -> world).
-  [[nodiscard]] OrganizedCloud Capture(const Eigen::Isometry3d& T_world_sensor);
+  // One frame taken at T_world_sensor (sensor optical frame -> world), of the scene as it is at
+  // scene time t_s (Scene::At; a static scene is the same at every time).
+  [[nodiscard]] OrganizedCloud Capture(const Eigen::Isometry3d& T_world_sensor, double t_s = 0.0);
   void Reseed(std::uint64_t seed) { rng_.seed(seed); }
 
  private:
