@@ -41,7 +41,8 @@ Usage: fusiond [options]
 
 A bad configuration is refused with a message naming the field; see docs/service.md.
 
-On start it prints "fusiond listening on HOST:PORT". SIGINT or SIGTERM stops it cleanly.
+On start it prints "fusiond listening on HOST:PORT" (and before it "fusiond metrics on
+HOST:PORT" when metrics.listen_address is set: docs/operations.md). SIGINT or SIGTERM stops it cleanly.
 Unless CYCLONEDDS_URI is set, DDS runs with an embedded configuration on 127.0.0.1.
 )";
 
@@ -157,6 +158,13 @@ int main(int argc, char** argv) {
   fusion::service::FusionServer server(config);
   if (!server.Start(&error)) return Fail(error);
   const std::string host = config.listen_address().substr(0, config.listen_address().rfind(':'));
+  // Before the listening line: a parent that read that line finds this one too.
+  const std::string& metrics_address = config.metrics().listen_address();
+  if (server.metrics_port() > 0) {
+    const std::string metrics_host = metrics_address.substr(0, metrics_address.rfind(':'));
+    std::printf("fusiond metrics on %s:%d\n", metrics_host.c_str(), server.metrics_port());
+    spdlog::info("metrics on http://{}:{}/metrics", metrics_host, server.metrics_port());
+  }
   std::printf("fusiond listening on %s:%d\n", host.c_str(), server.port());
   std::fflush(stdout);
   spdlog::info("listening on {}:{}, DDS domain {}, topic '{}'", host, server.port(),

@@ -9,11 +9,13 @@
 #include "fusion/service/dds_ingest.h"
 #include "fusion/service/map_service.h"
 #include "fusion/service/map_stack.h"
+#include "fusion/service/metrics.h"
 #include "fusion/service/security.h"
 
 namespace fusion::service {
 
 struct FusionServer::Parts {
+  std::unique_ptr<Metrics> metrics;  // first: the server's interceptors use it to the end
   std::unique_ptr<MapStack> stack;
   std::unique_ptr<DdsIngest> ingest;
   std::unique_ptr<MapService> service;
@@ -28,6 +30,11 @@ bool FusionServer::Start(std::string* error) {
   Parts& p = *parts_;
   p.stack = std::make_unique<MapStack>(
       config_, [this](bool ok) { SetHealth(kPersistenceHealth, ok); });
+  const std::string& metrics_address = config_.metrics().listen_address();
+  if (!metrics_address.empty()) {
+    p.metrics = std::make_unique<Metrics>();
+    p.stack->set_worker_histograms(p.metrics->worker());
+  }
   if (!p.stack->Start(error)) return false;
 
   participant_ = fusion::dds::CreateParticipant(config_.dds_domain(), error);
@@ -55,10 +62,19 @@ bool FusionServer::Start(std::string* error) {
   grpc::ServerBuilder builder;
   builder.AddListeningPort(config_.listen_address(), credentials, &port_);
   builder.RegisterService(p.service.get());
+  if (p.metrics) {
+    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> creators;
+    creators.push_back(p.metrics->RpcInterceptorFactory());
+    builder.experimental().SetInterceptorCreators(std::move(creators));
+  }
   server_ = builder.BuildAndStart();
   if (!server_ || port_ == 0) {
     *error = "cannot listen on '" + config_.listen_address() + "'";
     server_.reset();
+    return false;
+  }
+  if (p.metrics && !p.metrics->Listen(metrics_address, p.stack->state(), error)) {
+    *error = "metrics.listen_address: " + *error;
     return false;
   }
   {
@@ -81,6 +97,10 @@ bool FusionServer::Start(std::string* error) {
                security.tokens_file().empty() ? "no tokens" : "bearer tokens",
                ReflectionEnabled(security) ? "on" : "off");
   return true;
+}
+
+int FusionServer::metrics_port() const {
+  return parts_ && parts_->metrics ? parts_->metrics->port() : 0;
 }
 
 void FusionServer::SetHealth(const std::string& service, bool serving) {
@@ -106,6 +126,7 @@ bool FusionServer::Shutdown(std::chrono::milliseconds deadline) {
   }
   if (p.ingest) p.ingest->Stop();
   const bool saved = p.stack ? p.stack->Finish() : true;
+  if (p.metrics) p.metrics->Stop();  // before the state its scrapes read goes
   if (participant_ > 0) {
     dds_delete(participant_);
     participant_ = 0;

@@ -30,6 +30,7 @@
 #include "fusion/service/conversions.h"
 #include "fusion/service/ingest_queues.h"
 #include "fusion/service/map_snapshot.h"
+#include "fusion/service/metrics.h"
 
 namespace fusion::service {
 
@@ -44,6 +45,8 @@ struct WorkerOptions {
   // Reliable ingest: instead of merging clouds while the renderer is behind, the integrator
   // waits for it (the ingest queues then fill and DDS flow control slows the writers).
   bool wait_for_renderer = false;
+  // Step durations and latency to observe (metrics.h); all null: nothing is measured.
+  WorkerHistograms histograms;
 };
 
 // One beam of a sensor's beam grid, for inspection.
@@ -105,6 +108,7 @@ class FusionWorker {
   void CommitSealed(Sealed sealed);
   bool RenderOpen(Lane& lane);
   void PublishLocked();
+  void ObserveQueryable();  // under map_mutex_, after a publication
   Lane* LaneOf(const std::string& sensor_id) const;
 
   WorkerOptions options_;
