@@ -156,7 +156,12 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
 
   fusion::service::FusionServer server(config);
-  if (!server.Start(&error)) return Fail(error);
+  if (!server.Start(&error)) {
+    // Not Fail: fd 2 is the log's capture pipe by now (logging.cc), and the process would exit
+    // before its reader passes the message on. The log goes to the real stderr at once.
+    spdlog::critical("{}", error);
+    return 2;
+  }
   const std::string host = config.listen_address().substr(0, config.listen_address().rfind(':'));
   // Before the listening line: a parent that read that line finds this one too.
   const std::string& metrics_address = config.metrics().listen_address();

@@ -274,13 +274,11 @@ Metrics::RpcInterceptorFactory() {
   return std::make_unique<service::RpcInterceptorFactory>(&impl_->rpc);
 }
 
-bool Metrics::Listen(const std::string& address, const ServiceState* state, std::string* error) {
+bool Metrics::Listen(const std::string& address, std::string* error) {
   std::lock_guard<std::mutex> lock(impl_->mutex);
-  impl_->collector = std::make_shared<StateCollector>(state);
   try {
     auto exposer = std::make_unique<prometheus::Exposer>(address, 2);
     exposer->RegisterCollectable(impl_->registry);
-    exposer->RegisterCollectable(impl_->collector);
     const auto ports = exposer->GetListeningPorts();
     if (ports.empty()) {
       *error = "cannot listen on '" + address + "'";
@@ -293,6 +291,12 @@ bool Metrics::Listen(const std::string& address, const ServiceState* state, std:
     return false;
   }
   return true;
+}
+
+void Metrics::Observe(const ServiceState* state) {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  impl_->collector = std::make_shared<StateCollector>(state);
+  if (impl_->exposer) impl_->exposer->RegisterCollectable(impl_->collector);
 }
 
 int Metrics::port() const { return impl_->port; }

@@ -32,10 +32,16 @@ bool FusionServer::Start(std::string* error) {
       config_, [this](bool ok) { SetHealth(kPersistenceHealth, ok); });
   const std::string& metrics_address = config_.metrics().listen_address();
   if (!metrics_address.empty()) {
+    // Bound first: a taken port is refused before anything else starts.
     p.metrics = std::make_unique<Metrics>();
+    if (!p.metrics->Listen(metrics_address, error)) {
+      *error = "metrics.listen_address: " + *error;
+      return false;
+    }
     p.stack->set_worker_histograms(p.metrics->worker());
   }
   if (!p.stack->Start(error)) return false;
+  if (p.metrics) p.metrics->Observe(p.stack->state());
 
   participant_ = fusion::dds::CreateParticipant(config_.dds_domain(), error);
   if (participant_ < 0) return false;
@@ -71,10 +77,6 @@ bool FusionServer::Start(std::string* error) {
   if (!server_ || port_ == 0) {
     *error = "cannot listen on '" + config_.listen_address() + "'";
     server_.reset();
-    return false;
-  }
-  if (p.metrics && !p.metrics->Listen(metrics_address, p.stack->state(), error)) {
-    *error = "metrics.listen_address: " + *error;
     return false;
   }
   {

@@ -39,11 +39,12 @@ class Metrics {
   // Counts and times every RPC of a server built with it (by service, method and status code).
   [[nodiscard]] std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>
   RpcInterceptorFactory();
-  // Serves /metrics on `address` ("IPv4:port", "[IPv6]:port"; port 0: the OS chooses), the
-  // counters and gauges read from `state` at each scrape. `state` must outlive Stop. False
+  // Serves /metrics on `address` ("IPv4:port", "[IPv6]:port"; port 0: the OS chooses). False
   // with *error set when it cannot listen.
-  [[nodiscard]] bool Listen(const std::string& address, const ServiceState* state,
-                            std::string* error);
+  [[nodiscard]] bool Listen(const std::string& address, std::string* error);
+  // From now on each scrape also reads the counters and gauges of `state` (once it is set up:
+  // its queues, worker, hub and persister). `state` must outlive Stop.
+  void Observe(const ServiceState* state);
   // The port Listen bound (0 before).
   [[nodiscard]] int port() const;
   // Stops the HTTP server (waits for a scrape in progress); no scrape reads the state after.
