@@ -1,9 +1,9 @@
 #include "fusion/service/config.h"
 
+#include <arpa/inet.h>
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
-#include <arpa/inet.h>
 
 #include <cmath>
 #include <fstream>

@@ -166,7 +166,8 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   const WorkerHistograms& histograms = options_.histograms;
   {
     std::lock_guard<std::mutex> lock(lane->mutex);
-    const Clock::time_point start = histograms.integration_seconds ? Clock::now() : Clock::time_point{};
+    const Clock::time_point start =
+        histograms.integration_seconds ? Clock::now() : Clock::time_point{};
     try {
       status = lane->periods->Integrate(T_world_sensor, cloud.xyz.data(), cloud.xyz.size() / 3,
                                         cloud.beyond_range, may_seal, &result, &sealed);

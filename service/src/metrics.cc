@@ -34,12 +34,23 @@ prometheus::Histogram::BucketBoundaries Exponential(double first, double factor,
 }
 
 const char* StatusCodeName(grpc::StatusCode code) {
-  static const char* const kNames[] = {
-      "OK",          "CANCELLED",         "UNKNOWN",        "INVALID_ARGUMENT",
-      "DEADLINE_EXCEEDED", "NOT_FOUND",   "ALREADY_EXISTS", "PERMISSION_DENIED",
-      "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION", "ABORTED", "OUT_OF_RANGE",
-      "UNIMPLEMENTED", "INTERNAL",        "UNAVAILABLE",    "DATA_LOSS",
-      "UNAUTHENTICATED"};
+  static const char* const kNames[] = {"OK",
+                                       "CANCELLED",
+                                       "UNKNOWN",
+                                       "INVALID_ARGUMENT",
+                                       "DEADLINE_EXCEEDED",
+                                       "NOT_FOUND",
+                                       "ALREADY_EXISTS",
+                                       "PERMISSION_DENIED",
+                                       "RESOURCE_EXHAUSTED",
+                                       "FAILED_PRECONDITION",
+                                       "ABORTED",
+                                       "OUT_OF_RANGE",
+                                       "UNIMPLEMENTED",
+                                       "INTERNAL",
+                                       "UNAVAILABLE",
+                                       "DATA_LOSS",
+                                       "UNAUTHENTICATED"};
   const int index = static_cast<int>(code);
   return index >= 0 && index < 17 ? kNames[index] : "UNKNOWN";
 }
@@ -86,12 +97,11 @@ class StateCollector final : public prometheus::Collectable {
                          "Clouds merged into an open period while the renderer was behind",
                          counter);
     FamilyBuilder rejected("fusiond_clouds_rejected_total",
-                           "Samples rejected before integration, by sensor id and reason",
-                           counter);
+                           "Samples rejected before integration, by sensor id and reason", counter);
     FamilyBuilder queue("fusiond_ingest_queue_clouds",
                         "Clouds waiting for the fusion worker, by sensor", MetricType::Gauge);
-    FamilyBuilder grid_bytes("fusiond_beam_grid_memory_bytes",
-                             "Memory of a sensor's beam grids", MetricType::Gauge);
+    FamilyBuilder grid_bytes("fusiond_beam_grid_memory_bytes", "Memory of a sensor's beam grids",
+                             MetricType::Gauge);
     const IngestQueues& queues = *state_->queues;
     std::array<std::uint64_t, kRejectReasonCount> by_sensors{};
     std::uint64_t rejected_by_sensors = 0;
@@ -120,16 +130,16 @@ class StateCollector final : public prometheus::Collectable {
     };
     received.Add(Rest(all.Total(), rejected_by_sensors), {{"sensor", kUnconfiguredSensor}});
     for (std::size_t i = 0; i < kRejectReasonCount; ++i) {
-      rejected.Add(Rest(all.by_reason[i].load(), by_sensors[i]),
-                   {{"reason", RejectReasonName(RejectReason(i))},
-                    {"sensor", kUnconfiguredSensor}});
+      rejected.Add(
+          Rest(all.by_reason[i].load(), by_sensors[i]),
+          {{"reason", RejectReasonName(RejectReason(i))}, {"sensor", kUnconfiguredSensor}});
     }
     FamilyBuilder queue_bytes("fusiond_ingest_queue_bytes",
                               "Bytes of the clouds waiting for the fusion worker",
                               MetricType::Gauge);
     queue_bytes.Add(static_cast<double>(queues.queued_bytes()));
-    for (FamilyBuilder* f :
-         {&received, &integrated, &dropped, &merged, &rejected, &queue, &queue_bytes, &grid_bytes}) {
+    for (FamilyBuilder* f : {&received, &integrated, &dropped, &merged, &rejected, &queue,
+                             &queue_bytes, &grid_bytes}) {
       out->push_back(std::move(f->family));
     }
   }
@@ -147,12 +157,10 @@ class StateCollector final : public prometheus::Collectable {
     version.Add(static_cast<double>(snapshot->version));
     FamilyBuilder leaves("fusiond_map_leaves", "Leaf nodes of the published map", gauge);
     leaves.Add(static_cast<double>(snapshot->sizes().leaves));
-    FamilyBuilder bytes("fusiond_map_memory_bytes", "Memory of the published map's octree",
-                        gauge);
+    FamilyBuilder bytes("fusiond_map_memory_bytes", "Memory of the published map's octree", gauge);
     bytes.Add(static_cast<double>(snapshot->sizes().memory_bytes));
     FamilyBuilder written("fusiond_snapshots_written_total",
-                          "Snapshot files written (periodic, SaveMap, final)",
-                          MetricType::Counter);
+                          "Snapshot files written (periodic, SaveMap, final)", MetricType::Counter);
     written.Add(static_cast<double>(state_->persister->saves()));
     FamilyBuilder failed("fusiond_snapshots_failed_total", "Snapshot writes that failed",
                          MetricType::Counter);
@@ -162,8 +170,8 @@ class StateCollector final : public prometheus::Collectable {
                           "NOT_SERVING), else 0",
                           gauge);
     failing.Add(state_->persister->failing() ? 1.0 : 0.0);
-    FamilyBuilder streams("fusiond_update_stream_subscribers",
-                          "StreamUpdates subscriptions open", gauge);
+    FamilyBuilder streams("fusiond_update_stream_subscribers", "StreamUpdates subscriptions open",
+                          gauge);
     streams.Add(static_cast<double>(state_->update_streams.load()));
     FamilyBuilder heavy("fusiond_heavy_queries_running",
                         "Expensive calls (FindPlanes, QueryBox, GetSnapshot) running", gauge);
@@ -216,8 +224,7 @@ class RpcInterceptor final : public grpc::experimental::Interceptor {
   std::string service_, method_;
 };
 
-class RpcInterceptorFactory final
-    : public grpc::experimental::ServerInterceptorFactoryInterface {
+class RpcInterceptorFactory final : public grpc::experimental::ServerInterceptorFactoryInterface {
  public:
   explicit RpcInterceptorFactory(const RpcMetrics* metrics) : metrics_(metrics) {}
   grpc::experimental::Interceptor* CreateServerInterceptor(

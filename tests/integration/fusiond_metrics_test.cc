@@ -159,8 +159,9 @@ TEST_F(FusiondMetricsTest, ScrapesParseAndCountersFollowCloudsAndCalls) {
   const v1::Stats stats = Stats();
   const PrometheusText now = Scrape();
   EXPECT_EQ(now.Value(kIntegrated), stats.clouds_integrated());
-  EXPECT_EQ(now.Value(kReceived) + now.Value(R"(fusiond_clouds_received_total{sensor="unconfigured"})"),
-            stats.clouds_received());
+  EXPECT_EQ(
+      now.Value(kReceived) + now.Value(R"(fusiond_clouds_received_total{sensor="unconfigured"})"),
+      stats.clouds_received());
   EXPECT_EQ(now.Value("fusiond_map_version"), stats.map_version());
   EXPECT_EQ(now.Value("fusiond_map_leaves"), stats.map_leaves());
   // Snapshots are written every second here: at least as many as GetStats saw.
@@ -198,7 +199,8 @@ TEST_F(FusiondMetricsTest, ScrapesParseAndCountersFollowCloudsAndCalls) {
   }
   const std::string file = dir_ + "/metrics.txt";
   std::ofstream(file) << body_;
-  Subprocess check({"/bin/sh", "-c", *promtool + " check metrics < '" + file + "' 2>&1; echo rc=$?"});
+  Subprocess check(
+      {"/bin/sh", "-c", *promtool + " check metrics < '" + file + "' 2>&1; echo rc=$?"});
   const auto rc = check.WaitForOutput(R"(rc=(\d+))", 10s);
   ASSERT_TRUE(rc) << check.output();
   EXPECT_EQ(*rc, "0") << "promtool check metrics: " << check.output();
@@ -219,9 +221,8 @@ TEST_F(FusiondMetricsTest, ABadOrTakenAddressIsRefusedNamingTheField) {
   ASSERT_TRUE(fusiond);
   const std::string taken = "127.0.0.1:" + std::to_string(metrics_port_);
   const std::string bad_config = dir_ + "/bad.pbtxt";
-  for (const std::string& address : {std::string("localhost:9464"),
-                                     std::string("127.0.0.1:65536"), std::string("127.0.0.1"),
-                                     std::string("[::1]:x"), taken}) {
+  for (const std::string& address : {std::string("localhost:9464"), std::string("127.0.0.1:65536"),
+                                     std::string("127.0.0.1"), std::string("[::1]:x"), taken}) {
     std::ofstream(bad_config) << base << "metrics { listen_address: \"" << address << "\" }\n";
     // Through a shell: the message goes to stderr ("fusiond: metrics.listen_address: ..."
     // for a bad value; a taken port is found once logging runs: a critical log line).

@@ -96,15 +96,18 @@ inline bool ParseLabels(const std::string& s, std::size_t* pos,
     if (j >= s.size()) return (*error = "unterminated label value", false);
     if (!labels->emplace(name, value).second) return (*error = "label repeated: " + name, false);
     i = j + 1;
-    if (i < s.size() && s[i] == ',') ++i;
-    else if (i < s.size() && s[i] != '}') return (*error = "expected ',' or '}'", false);
+    if (i < s.size() && s[i] == ',')
+      ++i;
+    else if (i < s.size() && s[i] != '}')
+      return (*error = "expected ',' or '}'", false);
   }
   if (i >= s.size()) return (*error = "unterminated label set", false);
   *pos = i + 1;
   return true;
 }
 
-inline std::string SeriesKey(const std::string& name, const std::map<std::string, std::string>& labels) {
+inline std::string SeriesKey(const std::string& name,
+                             const std::map<std::string, std::string>& labels) {
   std::string key = name;
   if (labels.empty()) return key;
   key += '{';
@@ -117,7 +120,8 @@ inline std::string SeriesKey(const std::string& name, const std::map<std::string
 }
 
 // The family a sample name belongs to, given the family whose TYPE line came last.
-inline bool BelongsTo(const std::string& sample, const std::string& family, const std::string& type) {
+inline bool BelongsTo(const std::string& sample, const std::string& family,
+                      const std::string& type) {
   if (sample == family) return type != "histogram";
   const auto Suffixed = [&](const char* suffix) { return sample == family + suffix; };
   if (type == "histogram") return Suffixed("_bucket") || Suffixed("_sum") || Suffixed("_count");
@@ -130,8 +134,8 @@ inline bool BelongsTo(const std::string& sample, const std::string& family, cons
 inline PrometheusText PrometheusText::Parse(const std::string& text) {
   namespace d = prometheus_text_detail;
   PrometheusText out;
-  std::string family, type;                  // the family being read
-  std::set<std::string> finished;            // families whose samples are over
+  std::string family, type;                   // the family being read
+  std::set<std::string> finished;             // families whose samples are over
   std::map<std::string, double> last_bucket;  // histogram series (no le) -> previous bucket
   std::istringstream in(text);
   std::string line;

@@ -129,9 +129,9 @@ TEST(ConfigProtoTest, MetricsAddressIsOptionalAndNumeric) {
   for (const char* address : {"127.0.0.1:9464", "127.0.0.1:0", "0.0.0.0:9464", "[::1]:0"}) {
     auto config = DefaultConfig();
     std::string error;
-    EXPECT_TRUE(LoadConfigFile(WriteTemp("metrics.pbtxt", std::string("metrics { listen_address: \"") +
-                                                              address + "\" }"),
-                               &config, &error))
+    EXPECT_TRUE(LoadConfigFile(
+        WriteTemp("metrics.pbtxt", std::string("metrics { listen_address: \"") + address + "\" }"),
+        &config, &error))
         << address << ": " << error;
     EXPECT_EQ(config.metrics().listen_address(), address);
   }

@@ -1,11 +1,11 @@
 // The strict Prometheus text-format reader the metrics integration test relies on
 // (tests/support/prometheus_text.h): it must accept what the format allows and refuse each
 // kind of malformed line, or that test would prove nothing.
+#include "../../support/prometheus_text.h"
+
 #include <gtest/gtest.h>
 
 #include <string>
-
-#include "../../support/prometheus_text.h"
 
 namespace fusion::testing {
 namespace {
