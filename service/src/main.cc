@@ -32,6 +32,8 @@ Usage: fusiond [options]
   --render-interval-ms MS  render cadence (default 200)
   --snapshot FILE     snapshot file (.ot): loaded at start, written periodically and on exit
   --snapshot-interval S    periodic snapshot interval in seconds, 0 = only on exit (default 30)
+  --metrics-listen HOST:PORT  Prometheus /metrics over HTTP (default off; e.g.
+                      127.0.0.1:9464, port 0: the OS picks; docs/operations.md)
   --tls-cert FILE     TLS: the server's certificate chain (PEM); with --tls-key
   --tls-key FILE      TLS: the server's private key (PEM)
   --tls-client-ca FILE  mutual TLS: clients need a certificate signed by this CA
@@ -106,6 +108,8 @@ int ApplyFlags(int argc, char** argv, fusion::v1::ServiceConfig* config_out) {
         return Fail("--render-interval-ms: not a number of milliseconds");
       }
       config.mutable_map()->set_render_interval_ms(static_cast<unsigned>(ms));
+    } else if (arg == "--metrics-listen" && has_value) {
+      config.mutable_metrics()->set_listen_address(argv[++i]);
     } else if (arg == "--tls-cert" && has_value) {
       config.mutable_security()->set_tls_cert_file(argv[++i]);
     } else if (arg == "--tls-key" && has_value) {

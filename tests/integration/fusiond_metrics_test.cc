@@ -13,6 +13,7 @@
 #include <csignal>
 #include <fstream>
 #include <iterator>
+#include <regex>
 #include <string>
 #include <thread>
 
@@ -234,6 +235,67 @@ TEST_F(FusiondMetricsTest, ABadOrTakenAddressIsRefusedNamingTheField) {
   // The first one goes on serving.
   EXPECT_TRUE(PrometheusText::Parse(HttpGet(metrics_port_, "/metrics", &body_)).ok());
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+}
+
+// The repository (FUSION_SHARED_DATA_DIR is <repo>/../shared/data).
+std::string RepoDir() {
+  const std::string dir = FUSION_SHARED_DATA_DIR;
+  return dir.substr(0, dir.size() - std::string("/../shared/data").size());
+}
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+// The dashboard and the alerts ask only for metrics fusiond exposes (a renamed metric would
+// leave an empty panel or an alert that never fires), and Prometheus' tools accept the files.
+TEST_F(FusiondMetricsTest, DashboardAndAlertsUseOnlyExposedMetrics) {
+  auto fusiond = StartWithMetrics();
+  ASSERT_TRUE(fusiond);
+  (void)Stats();  // a family without series is left out: one call for the RPC families
+  const PrometheusText metrics = Scrape();
+  ASSERT_TRUE(metrics.ok());
+  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+  const std::string dashboard = RepoDir() + "/docker/grafana/fusiond-dashboard.json";
+  const std::string alerts = RepoDir() + "/docker/fusiond-alerts.yml";
+  for (const std::string& file : {dashboard, alerts}) {
+    const std::string text = ReadFile(file);
+    ASSERT_FALSE(text.empty()) << file;
+    const std::regex name(R"(\bfusiond_[a-z_]+)");
+    int names = 0;
+    for (auto it = std::sregex_iterator(text.begin(), text.end(), name);
+         it != std::sregex_iterator(); ++it, ++names) {
+      std::string family = it->str();
+      for (const char* suffix : {"_bucket", "_sum", "_count"}) {
+        const std::string s = suffix;
+        if (!metrics.types.count(family) && family.size() > s.size() &&
+            family.compare(family.size() - s.size(), s.size(), s) == 0) {
+          family.resize(family.size() - s.size());
+        }
+      }
+      EXPECT_TRUE(metrics.types.count(family)) << file << " asks for " << it->str();
+    }
+    EXPECT_GE(names, 5) << file;
+  }
+  Subprocess json({"/bin/sh", "-c",
+                   "/usr/bin/python3 -c 'import json,sys; json.load(open(sys.argv[1]))' '" +
+                       dashboard + "' 2>&1; echo rc=$?"});
+  const auto json_rc = json.WaitForOutput(R"(rc=(\d+))", 10s);
+  ASSERT_TRUE(json_rc) << json.output();
+  EXPECT_EQ(*json_rc, "0") << dashboard << " is not JSON: " << json.output();
+
+  Subprocess which({"/bin/sh", "-c", "command -v promtool || echo none"});
+  const auto promtool = which.WaitForOutput(R"((\S+)\n)", 5s);
+  (void)which.Wait(5s);
+  if (!promtool || *promtool == "none")
+    GTEST_SKIP() << "promtool not installed (package 'prometheus')";
+  Subprocess check(
+      {"/bin/sh", "-c",
+       *promtool + " check config '" + RepoDir() + "/docker/prometheus.yml' 2>&1; echo rc=$?"});
+  const auto rc = check.WaitForOutput(R"(rc=(\d+))", 10s);
+  ASSERT_TRUE(rc) << check.output();
+  EXPECT_EQ(*rc, "0") << check.output();
 }
 
 }  // namespace
