@@ -163,11 +163,9 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   PeriodIntegration result;
   std::unique_ptr<Period> sealed;
   MapStatus status = MapStatus::kInvalidArgument;
-  const WorkerHistograms& histograms = options_.histograms;
   {
     std::lock_guard<std::mutex> lock(lane->mutex);
-    const Clock::time_point start =
-        histograms.integration_seconds ? Clock::now() : Clock::time_point{};
+    const auto start = options_.histograms.integration_seconds ? Clock::now() : Clock::time_point{};
     try {
       status = lane->periods->Integrate(T_world_sensor, cloud.xyz.data(), cloud.xyz.size() / 3,
                                         cloud.beyond_range, may_seal, &result, &sealed);
@@ -176,10 +174,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
                     cloud.sensor_id, e.what());
       return;
     }
-    if (histograms.integration_seconds) histograms.integration_seconds->Observe(SecondsSince(start));
-    if (histograms.dds_to_queryable_seconds && status == MapStatus::kOk) {
-      lane->awaiting_publication.push_back(cloud.received_at);
-    }
+    ObserveIntegration(*lane, cloud, start, status);
     lane->counters->memory_bytes.store(lane->periods->MemoryBytes());
   }
   if (status != MapStatus::kOk) {
@@ -226,6 +221,16 @@ void FusionWorker::Integrate(const Cloud& cloud) {
                 cloud.sequence_number, cloud.sensor_id, result.stats.updated,
                 result.stats.beyond_range, result.stats.missing,
                 result.merged ? " (merged: the renderer is behind)" : "");
+}
+
+// Under lane.mutex; `start` is when the integration began (read only with that histogram).
+void FusionWorker::ObserveIntegration(Lane& lane, const Cloud& cloud, Clock::time_point start,
+                                      MapStatus status) {
+  const WorkerHistograms& histograms = options_.histograms;
+  if (histograms.integration_seconds) histograms.integration_seconds->Observe(SecondsSince(start));
+  if (histograms.dds_to_queryable_seconds && status == MapStatus::kOk) {
+    lane.awaiting_publication.push_back(cloud.received_at);
+  }
 }
 
 // ---- renderer ---------------------------------------------------------------------------------

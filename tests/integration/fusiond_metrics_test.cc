@@ -114,18 +114,39 @@ std::string RpcSeries(const std::string& method, const std::string& code) {
          R"(",service="fusion.v1.FusionMap"})";
 }
 
+// Every family is typed and documented; fusiond's counters and only they end in _total.
+void ExpectTypedDocumentedAndNamed(const PrometheusText& metrics) {
+  for (const auto& [name, type] : metrics.types) {
+    EXPECT_FALSE(metrics.help.at(name).empty()) << name;
+    if (name.rfind("fusiond_", 0) != 0) continue;
+    const bool total = name.size() > 6 && name.compare(name.size() - 6, 6, "_total") == 0;
+    EXPECT_EQ(type == "counter", total) << name << " is a " << type;
+  }
+}
+
+// `promtool check metrics` (format and naming lint) accepts `body`; skipped without promtool.
+void ExpectPromtoolAccepts(const std::string& body, const std::string& file) {
+  Subprocess which({"/bin/sh", "-c", "command -v promtool || echo none"});
+  const auto promtool = which.WaitForOutput(R"((\S+)\n)", 5s);
+  (void)which.Wait(5s);
+  if (!promtool || *promtool == "none") {
+    GTEST_SKIP() << "promtool not installed (Debian package 'prometheus'): format checked by "
+                    "the test's own parser only";
+  }
+  std::ofstream(file) << body;
+  Subprocess check(
+      {"/bin/sh", "-c", *promtool + " check metrics < '" + file + "' 2>&1; echo rc=$?"});
+  const auto rc = check.WaitForOutput(R"(rc=(\d+))", 10s);
+  ASSERT_TRUE(rc) << check.output();
+  EXPECT_EQ(*rc, "0") << "promtool check metrics: " << check.output();
+}
+
 TEST_F(FusiondMetricsTest, ScrapesParseAndCountersFollowCloudsAndCalls) {
   auto fusiond = StartWithMetrics();
   ASSERT_TRUE(fusiond);
   const PrometheusText before = Scrape();
   ASSERT_TRUE(before.ok());
-  // Every family is typed and documented; the counters follow the naming conventions.
-  for (const auto& [name, type] : before.types) {
-    EXPECT_FALSE(before.help.at(name).empty()) << name;
-    if (name.rfind("fusiond_", 0) != 0) continue;
-    const bool total = name.size() > 6 && name.compare(name.size() - 6, 6, "_total") == 0;
-    EXPECT_EQ(type == "counter", total) << name << " is a " << type;
-  }
+  ExpectTypedDocumentedAndNamed(before);
   ASSERT_TRUE(before.Has(kReceived)) << body_;
   EXPECT_EQ(before.Value(kReceived), 0.0);
   EXPECT_EQ(before.Value(kIntegrated), 0.0);
@@ -191,20 +212,7 @@ TEST_F(FusiondMetricsTest, ScrapesParseAndCountersFollowCloudsAndCalls) {
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
 
   // Prometheus' own checker on the last scrape (histograms and call series filled in).
-  Subprocess which({"/bin/sh", "-c", "command -v promtool || echo none"});
-  const auto promtool = which.WaitForOutput(R"((\S+)\n)", 5s);
-  (void)which.Wait(5s);
-  if (!promtool || *promtool == "none") {
-    GTEST_SKIP() << "promtool not installed (Debian package 'prometheus'): format checked by "
-                    "the test's own parser only";
-  }
-  const std::string file = dir_ + "/metrics.txt";
-  std::ofstream(file) << body_;
-  Subprocess check(
-      {"/bin/sh", "-c", *promtool + " check metrics < '" + file + "' 2>&1; echo rc=$?"});
-  const auto rc = check.WaitForOutput(R"(rc=(\d+))", 10s);
-  ASSERT_TRUE(rc) << check.output();
-  EXPECT_EQ(*rc, "0") << "promtool check metrics: " << check.output();
+  ExpectPromtoolAccepts(body_, dir_ + "/metrics.txt");
 }
 
 TEST_F(FusiondMetricsTest, MetricsAreOffByDefault) {

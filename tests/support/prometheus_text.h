@@ -131,6 +131,8 @@ inline bool BelongsTo(const std::string& sample, const std::string& family,
 
 }  // namespace prometheus_text_detail
 
+// Long because one pass checks the format's rules in the order a line meets them; the
+// pieces that stand alone are in prometheus_text_detail.
 inline PrometheusText PrometheusText::Parse(const std::string& text) {
   namespace d = prometheus_text_detail;
   PrometheusText out;

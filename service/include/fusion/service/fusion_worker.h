@@ -102,6 +102,8 @@ class FusionWorker {
   void IntegratorLoop();
   void RendererLoop();
   void Integrate(const Cloud& cloud);
+  void ObserveIntegration(Lane& lane, const Cloud& cloud,
+                          std::chrono::steady_clock::time_point start, MapStatus status);
   // One renderer step (sealed period first, else an open period); false if there was nothing
   // to do.
   bool RenderStep();
