@@ -348,8 +348,9 @@ bool FusionWorker::RenderOpen(Lane& lane) {
     }
     try {
       const SaturatedFree skip = map_->Saturation(lane.setup->id);
+      const Clock::time_point render_start = Clock::now();
       grid = Render(*open.grid, open.T_world_sensor, render_options_, nullptr, &skip);
-      if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(start));
+      if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(render_start));
     } catch (const std::exception& e) {
       spdlog::error("worker: render of '{}' failed: {}", lane.setup->id, e.what());
       return false;

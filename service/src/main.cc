@@ -44,7 +44,7 @@ Usage: fusiond [options]
 A bad configuration is refused with a message naming the field; see docs/service.md.
 
 On start it prints "fusiond listening on HOST:PORT" (and before it "fusiond metrics on
-HOST:PORT" when metrics.listen_address is set: docs/operations.md). SIGINT or SIGTERM stops it cleanly.
+HOST:PORT" when metrics are on: docs/operations.md). SIGINT or SIGTERM stops it cleanly.
 Unless CYCLONEDDS_URI is set, DDS runs with an embedded configuration on 127.0.0.1.
 )";
 

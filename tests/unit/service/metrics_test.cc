@@ -1,6 +1,6 @@
 // fusiond's metrics in process (service/src/metrics.cc): a MapStack whose worker observes the
 // histograms, a MapService behind the RPC interceptor, the endpoint on 127.0.0.1:0, scraped
-// while clouds are integrated (the thread sanitizer build runs that) and calls answered.
+// while clouds are integrated and calls answered (clean under the thread sanitizer too).
 #include "fusion/service/metrics.h"
 
 #include <gtest/gtest.h>
@@ -96,8 +96,7 @@ TEST_F(MetricsTest, ScrapesWhileTheWorkerIntegrates) {
   EXPECT_EQ(after.Value(R"(fusiond_clouds_integrated_total{sensor="cam"})"), 6.0);
 }
 
-// Calls through the interceptor, counted by method and code. (Client and server in one
-// process: left out of the thread-sanitizer run like HandlerTest, .ci/run.)
+// Calls through the interceptor, counted by method and code.
 TEST_F(MetricsTest, CallsAreCountedByMethodAndCode) {
   for (int i = 0; i < 4; ++i) (void)Stats();
   v1::CastRayResponse ray;
