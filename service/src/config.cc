@@ -1,5 +1,6 @@
 #include "fusion/service/config.h"
 
+#include <arpa/inet.h>
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
@@ -142,6 +143,28 @@ Status ValidateLimits(const fusion::v1::QueryLimits& limits) {
   return Status::Ok();
 }
 
+// The metrics endpoint's address: empty (off), "IPv4:port" or "[IPv6]:port" with a numeric
+// address (the HTTP server does not resolve names) and a port in 0..65535 (0: the OS chooses).
+Status ValidateMetrics(const fusion::v1::MetricsConfig& metrics) {
+  const std::string& address = metrics.listen_address();
+  if (address.empty()) return Status::Ok();
+  const auto colon = address.rfind(':');
+  const std::string port = colon == std::string::npos ? "" : address.substr(colon + 1);
+  std::string host = colon == std::string::npos ? address : address.substr(0, colon);
+  const bool v6 = host.size() > 2 && host.front() == '[' && host.back() == ']';
+  if (v6) host = host.substr(1, host.size() - 2);
+  unsigned char parsed[16];
+  const bool host_ok = inet_pton(v6 ? AF_INET6 : AF_INET, host.c_str(), parsed) == 1;
+  const bool port_ok = !port.empty() && port.size() <= 5 &&
+                       port.find_first_not_of("0123456789") == std::string::npos &&
+                       std::stoul(port) <= 65535;
+  if (!host_ok || !port_ok) {
+    return Fail("metrics.listen_address",
+                "'" + address + "' is not IPv4:port or [IPv6]:port (numeric, port 0..65535)");
+  }
+  return Status::Ok();
+}
+
 // fusiond's deployed map defaults, where they differ from core's on purpose. The one place for
 // them: every other map default in DefaultConfig() is core's own constant.
 // - Voxels of 5 cm (core's WorldMapOptions: 2 cm): a service maps rooms to buildings while its
@@ -244,7 +267,7 @@ Status ValidateConfig(const fusion::v1::ServiceConfig& config) {
   for (const Status& part :
        {ValidateSensors(config), ValidateMap(config.map()), ValidateBeamLengths(config),
         ValidateIngest(config.ingest()), ValidateLimits(config.limits()),
-        ValidateSecurity(config.security())}) {
+        ValidateSecurity(config.security()), ValidateMetrics(config.metrics())}) {
     if (!part.ok()) return part;
   }
   return Status::Ok();

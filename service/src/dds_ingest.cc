@@ -162,7 +162,9 @@ void DdsIngest::Handle(const fusion_dds_PointCloud& sample) {
     return;
   }
   // Reliable ingest waits for room (lossless); sensor data replaces the oldest cloud.
-  (void)queues_->Push(CloudFromDds(sample), options_.reliable ? &stop_ : nullptr);
+  Cloud cloud = CloudFromDds(sample);
+  cloud.received_at = std::chrono::steady_clock::now();
+  (void)queues_->Push(std::move(cloud), options_.reliable ? &stop_ : nullptr);
 }
 
 void DdsIngest::LogRejection(RejectReason reason, const std::string& sensor_id,

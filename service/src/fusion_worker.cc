@@ -1,5 +1,6 @@
 #include "fusion/service/fusion_worker.h"
 
+#include <prometheus/histogram.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -17,6 +18,9 @@ struct FusionWorker::Lane {
   SensorCountersAtomic* counters = nullptr;
   mutable std::mutex mutex;  // guards periods (the integrator, a render of the open period)
   std::unique_ptr<SensorPeriods> periods;
+  // Arrival times of the integrated clouds not yet in a published map, oldest first (only
+  // with the DDS-to-queryable histogram).
+  std::deque<std::chrono::steady_clock::time_point> awaiting_publication;
   // Guarded by work_mutex_.
   std::size_t sealed_waiting = 0;  // sealed periods not yet committed
   bool dirty = false;              // the open period has frames its last render did not see
@@ -27,10 +31,17 @@ struct FusionWorker::Lane {
   std::uint64_t live_sequence = 0;  // the period the map's live contribution renders
   std::uint64_t live_frames = 0;    // and how many of its frames
   std::uint64_t committed_clouds = 0;
+  std::uint64_t published_clouds = 0;  // committed + live as of the last publication
   std::chrono::steady_clock::time_point last_open_render{};
 };
 
 namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
 
 void LowerPriority(int nice, const char* what) {
   // Queries come first: the worker's threads (and the render threads they start, which inherit
@@ -152,6 +163,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   MapStatus status = MapStatus::kInvalidArgument;
   {
     std::lock_guard<std::mutex> lock(lane->mutex);
+    const auto start = options_.histograms.integration_seconds ? Clock::now() : Clock::time_point{};
     try {
       status = lane->periods->Integrate(T_world_sensor, cloud.xyz.data(), cloud.xyz.size() / 3,
                                         cloud.beyond_range, may_seal, &result, &sealed);
@@ -160,6 +172,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
                     cloud.sensor_id, e.what());
       return;
     }
+    ObserveIntegration(*lane, cloud, start, status);
     lane->counters->memory_bytes.store(lane->periods->MemoryBytes());
   }
   if (status != MapStatus::kOk) {
@@ -206,6 +219,16 @@ void FusionWorker::Integrate(const Cloud& cloud) {
                 cloud.sequence_number, cloud.sensor_id, result.stats.updated,
                 result.stats.beyond_range, result.stats.missing,
                 result.merged ? " (merged: the renderer is behind)" : "");
+}
+
+// Under lane.mutex; `start` is when the integration began (read only with that histogram).
+void FusionWorker::ObserveIntegration(Lane& lane, const Cloud& cloud, Clock::time_point start,
+                                      MapStatus status) {
+  const WorkerHistograms& histograms = options_.histograms;
+  if (histograms.integration_seconds) histograms.integration_seconds->Observe(SecondsSince(start));
+  if (histograms.dds_to_queryable_seconds && status == MapStatus::kOk) {
+    lane.awaiting_publication.push_back(cloud.received_at);
+  }
 }
 
 // ---- renderer ---------------------------------------------------------------------------------
@@ -282,8 +305,10 @@ void FusionWorker::CommitSealed(Sealed sealed) {
     // The map may hold this period's render already (made while it was open).
     if (lane.live_sequence != period.sequence || lane.live_frames != period.frames) {
       const SaturatedFree skip = map_->Saturation(id);
+      const Clock::time_point start = Clock::now();
       (void)map_->ReplaceLive(
           id, Render(*period.grid, period.T_world_sensor, render_options_, nullptr, &skip));
+      if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(start));
       renders_.fetch_add(1);
     }
     (void)map_->CommitLive(id);
@@ -321,7 +346,9 @@ bool FusionWorker::RenderOpen(Lane& lane) {
     }
     try {
       const SaturatedFree skip = map_->Saturation(lane.setup->id);
+      const Clock::time_point render_start = Clock::now();
       grid = Render(*open.grid, open.T_world_sensor, render_options_, nullptr, &skip);
+      if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(render_start));
     } catch (const std::exception& e) {
       spdlog::error("worker: render of '{}' failed: {}", lane.setup->id, e.what());
       return false;
@@ -352,6 +379,26 @@ void FusionWorker::PublishLocked() {
   }
   // Counted once published: a client that sees these numbers can query what they count.
   in_map_.store(in_map);
+  if (options_.histograms.dds_to_queryable_seconds) ObserveQueryable();
+}
+
+// A lane's clouds reach the map in the order they were integrated (sealed periods before the
+// open one), so the ones that became queryable are the oldest awaiting.
+void FusionWorker::ObserveQueryable() {
+  const Clock::time_point now = Clock::now();
+  for (const auto& lane : lanes_) {
+    const std::uint64_t in_map = lane->committed_clouds + lane->live_frames;
+    if (in_map > lane->published_clouds) {
+      std::lock_guard<std::mutex> lock(lane->mutex);
+      auto& awaiting = lane->awaiting_publication;
+      for (std::uint64_t n = in_map - lane->published_clouds; n > 0 && !awaiting.empty(); --n) {
+        options_.histograms.dds_to_queryable_seconds->Observe(
+            std::chrono::duration<double>(now - awaiting.front()).count());
+        awaiting.pop_front();
+      }
+    }
+    lane->published_clouds = in_map;
+  }
 }
 
 std::uint64_t FusionWorker::Reset() {
@@ -360,6 +407,8 @@ std::uint64_t FusionWorker::Reset() {
     std::lock_guard<std::mutex> lane_lock(lane->mutex);
     lane->periods->Reset();
     lane->live_sequence = lane->live_frames = lane->committed_clouds = 0;
+    lane->published_clouds = 0;
+    lane->awaiting_publication.clear();
   }
   {
     std::lock_guard<std::mutex> work(work_mutex_);

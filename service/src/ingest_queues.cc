@@ -117,6 +117,13 @@ std::size_t IngestQueues::Pending() const {
   return n;
 }
 
+std::size_t IngestQueues::Pending(const std::string& sensor_id) const {
+  const auto it = slots_.find(sensor_id);
+  if (it == slots_.end()) return 0;
+  std::lock_guard<std::mutex> lock(mutex_);
+  return it->second->queue.size();
+}
+
 std::size_t IngestQueues::queued_bytes() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return queued_bytes_;

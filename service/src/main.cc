@@ -32,6 +32,8 @@ Usage: fusiond [options]
   --render-interval-ms MS  render cadence (default 200)
   --snapshot FILE     snapshot file (.ot): loaded at start, written periodically and on exit
   --snapshot-interval S    periodic snapshot interval in seconds, 0 = only on exit (default 30)
+  --metrics-listen HOST:PORT  Prometheus /metrics over HTTP (default off; e.g.
+                      127.0.0.1:9464, port 0: the OS picks; docs/operations.md)
   --tls-cert FILE     TLS: the server's certificate chain (PEM); with --tls-key
   --tls-key FILE      TLS: the server's private key (PEM)
   --tls-client-ca FILE  mutual TLS: clients need a certificate signed by this CA
@@ -41,7 +43,8 @@ Usage: fusiond [options]
 
 A bad configuration is refused with a message naming the field; see docs/service.md.
 
-On start it prints "fusiond listening on HOST:PORT". SIGINT or SIGTERM stops it cleanly.
+On start it prints "fusiond listening on HOST:PORT" (and before it "fusiond metrics on
+HOST:PORT" when metrics are on: docs/operations.md). SIGINT or SIGTERM stops it cleanly.
 Unless CYCLONEDDS_URI is set, DDS runs with an embedded configuration on 127.0.0.1.
 )";
 
@@ -103,6 +106,8 @@ int ApplyFlags(int argc, char** argv, fusion::v1::ServiceConfig* config_out) {
         return Fail("--render-interval-ms: not a number of milliseconds");
       }
       config.mutable_map()->set_render_interval_ms(static_cast<unsigned>(ms));
+    } else if (arg == "--metrics-listen" && has_value) {
+      config.mutable_metrics()->set_listen_address(argv[++i]);
     } else if (arg == "--tls-cert" && has_value) {
       config.mutable_security()->set_tls_cert_file(argv[++i]);
     } else if (arg == "--tls-key" && has_value) {
@@ -153,8 +158,20 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
 
   fusion::service::FusionServer server(config);
-  if (const fusion::Status started = server.Start(); !started.ok()) return Fail(started.message());
+  if (const fusion::Status started = server.Start(); !started.ok()) {
+    // Not Fail: fd 2 is the log's capture pipe by now (logging.cc), and the process would exit
+    // before its reader passes the message on. The log goes to the real stderr at once.
+    spdlog::critical("{}", started.message());
+    return 2;
+  }
   const std::string host = config.listen_address().substr(0, config.listen_address().rfind(':'));
+  // Before the listening line: a parent that read that line finds this one too.
+  const std::string& metrics_address = config.metrics().listen_address();
+  if (server.metrics_port() > 0) {
+    const std::string metrics_host = metrics_address.substr(0, metrics_address.rfind(':'));
+    std::printf("fusiond metrics on %s:%d\n", metrics_host.c_str(), server.metrics_port());
+    spdlog::info("metrics on http://{}:{}/metrics", metrics_host, server.metrics_port());
+  }
   std::printf("fusiond listening on %s:%d\n", host.c_str(), server.port());
   std::fflush(stdout);
   spdlog::info("listening on {}:{}, DDS domain {}, topic '{}'", host, server.port(),

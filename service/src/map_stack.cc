@@ -75,6 +75,7 @@ Status MapStack::Start() {
   worker_options.thresholds = state_.thresholds;
   worker_options.render_interval = std::chrono::milliseconds(config_.map().render_interval_ms());
   worker_options.wait_for_renderer = config_.ingest().reliability() == "reliable";
+  worker_options.histograms = histograms_;
   worker_ = std::make_unique<FusionWorker>(worker_options, state_.sensors, queues_.get(),
                                            hub_.get());
   const bool loaded = base != nullptr;

@@ -9,11 +9,13 @@
 #include "fusion/service/dds_ingest.h"
 #include "fusion/service/map_service.h"
 #include "fusion/service/map_stack.h"
+#include "fusion/service/metrics.h"
 #include "fusion/service/security.h"
 
 namespace fusion::service {
 
 struct FusionServer::Parts {
+  std::unique_ptr<Metrics> metrics;  // first: the server's interceptors use it to the end
   std::unique_ptr<MapStack> stack;
   std::unique_ptr<DdsIngest> ingest;
   std::unique_ptr<MapService> service;
@@ -28,7 +30,17 @@ Status FusionServer::Start() {
   Parts& p = *parts_;
   p.stack = std::make_unique<MapStack>(
       config_, [this](bool ok) { SetHealth(kPersistenceHealth, ok); });
+  const std::string& metrics_address = config_.metrics().listen_address();
+  if (!metrics_address.empty()) {
+    // Bound first: a taken port is refused before anything else starts.
+    p.metrics = std::make_unique<Metrics>();
+    if (Status listening = p.metrics->Listen(metrics_address); !listening.ok()) {
+      return listening.WithContext("metrics.listen_address");
+    }
+    p.stack->set_worker_histograms(p.metrics->worker());
+  }
   if (Status started = p.stack->Start(); !started.ok()) return started;
+  if (p.metrics) p.metrics->Observe(p.stack->state());
 
   std::string dds_error;
   participant_ = fusion::dds::CreateParticipant(config_.dds_domain(), &dds_error);
@@ -53,6 +65,11 @@ Status FusionServer::Start() {
   grpc::ServerBuilder builder;
   builder.AddListeningPort(config_.listen_address(), *credentials, &port_);
   builder.RegisterService(p.service.get());
+  if (p.metrics) {
+    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> creators;
+    creators.push_back(p.metrics->RpcInterceptorFactory());
+    builder.experimental().SetInterceptorCreators(std::move(creators));
+  }
   server_ = builder.BuildAndStart();
   if (!server_ || port_ == 0) {
     server_.reset();
@@ -80,6 +97,10 @@ Status FusionServer::Start() {
   return Status::Ok();
 }
 
+int FusionServer::metrics_port() const {
+  return parts_ && parts_->metrics ? parts_->metrics->port() : 0;
+}
+
 void FusionServer::SetHealth(const std::string& service, bool serving) {
   std::lock_guard<std::mutex> lock(health_mutex_);
   if (health_ != nullptr) health_->SetServingStatus(service, serving);
@@ -103,6 +124,7 @@ Status FusionServer::Shutdown(std::chrono::milliseconds deadline) {
   }
   if (p.ingest) p.ingest->Stop();
   const Status saved = p.stack ? p.stack->Finish() : Status::Ok();
+  if (p.metrics) p.metrics->Stop();  // before the state its scrapes read goes
   if (participant_ > 0) {
     dds_delete(participant_);
     participant_ = 0;

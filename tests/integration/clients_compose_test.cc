@@ -51,7 +51,7 @@ TEST_F(ComposeTest, HasTheServicesAndHealthCheck) {
   std::string services;
   ASSERT_EQ(Shell("docker-compose -f '" + compose_ + "' config --services", &services), 0)
       << services;
-  for (const char* name : {"certs", "fusiond", "sensor-sr3000", "sensor-stoc", "client"}) {
+  for (const char* name : {"certs", "fusiond", "sensor-sr3000", "sensor-stoc", "client", "prometheus"}) {
     EXPECT_NE(services.find(name), std::string::npos) << name << " missing in:\n" << services;
   }
   std::string config;
@@ -59,7 +59,8 @@ TEST_F(ComposeTest, HasTheServicesAndHealthCheck) {
   EXPECT_NE(config.find("health"), std::string::npos);
   EXPECT_NE(config.find("CYCLONEDDS_URI"), std::string::npos);
   // gRPC with TLS and tokens, and clients that present them.
-  for (const char* needed : {"--tls-cert", "--tokens-file", "FUSION_TLS_CA", "FUSION_TOKEN_FILE"}) {
+  for (const char* needed : {"--tls-cert", "--tokens-file", "FUSION_TLS_CA", "FUSION_TOKEN_FILE",
+                             "--metrics-listen"}) {
     EXPECT_NE(config.find(needed), std::string::npos) << needed;
   }
 }

@@ -107,12 +107,32 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
       {"limits { max_heavy_queries: 65 }", "limits.max_heavy_queries"},
       {"limits { heavy_query_nice: 5 }", "limits.heavy_query_nice"},
       {"ingest { max_queued_mb: 8 }", "ingest.max_queued_mb"},
+      {"metrics { listen_address: \"localhost:9464\" }", "metrics.listen_address"},
+      {"metrics { listen_address: \"127.0.0.1\" }", "metrics.listen_address"},
+      {"metrics { listen_address: \"127.0.0.1:65536\" }", "metrics.listen_address"},
+      {"metrics { listen_address: \"127.0.0.1:-1\" }", "metrics.listen_address"},
+      {"metrics { listen_address: \"127.0.0.1:\" }", "metrics.listen_address"},
+      {"metrics { listen_address: \"::1:9464\" }", "metrics.listen_address"},
+      {"metrics { listen_address: \"[::1:9464\" }", "metrics.listen_address"},
   };
   for (const auto& [text, field] : cases) {
     auto config = DefaultConfig();
     fusion::Status status;
     EXPECT_FALSE((status = LoadConfigFile(WriteTemp("bad_field.pbtxt", text), &config)).ok()) << text;
     EXPECT_EQ(status.message().rfind(field, 0), 0u) << text << " gave: " << status.message();
+  }
+}
+
+// Metrics are off by default; an address turns them on (numeric, any port including 0).
+TEST(ConfigProtoTest, MetricsAddressIsOptionalAndNumeric) {
+  EXPECT_TRUE(DefaultConfig().metrics().listen_address().empty());
+  for (const char* address : {"127.0.0.1:9464", "127.0.0.1:0", "0.0.0.0:9464", "[::1]:0"}) {
+    auto config = DefaultConfig();
+    const fusion::Status status = LoadConfigFile(
+        WriteTemp("metrics.pbtxt", std::string("metrics { listen_address: \"") + address + "\" }"),
+        &config);
+    EXPECT_TRUE(status.ok()) << address << ": " << status.message();
+    EXPECT_EQ(config.metrics().listen_address(), address);
   }
 }
 

@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -20,6 +21,8 @@ struct Cloud {
   std::uint32_t height = 0;
   std::vector<float> xyz;                  // 3 * width * height, sensor frame, metres
   std::vector<std::uint8_t> beyond_range;  // empty or width * height
+  // When the DDS sample arrived (for the DDS-to-queryable latency metric).
+  std::chrono::steady_clock::time_point received_at{};
 };
 
 enum class RejectReason : int {

@@ -31,6 +31,7 @@
 #include "fusion/service/conversions.h"
 #include "fusion/service/ingest_queues.h"
 #include "fusion/service/map_snapshot.h"
+#include "fusion/service/metrics.h"
 
 namespace fusion::service {
 
@@ -45,6 +46,8 @@ struct WorkerOptions {
   // Reliable ingest: instead of merging clouds while the renderer is behind, the integrator
   // waits for it (the ingest queues then fill and DDS flow control slows the writers).
   bool wait_for_renderer = false;
+  // Step durations and latency to observe (metrics.h); all null: nothing is measured.
+  WorkerHistograms histograms;
 };
 
 // One beam of a sensor's beam grid, for inspection.
@@ -106,12 +109,15 @@ class FusionWorker {
   void IntegratorLoop();
   void RendererLoop();
   void Integrate(const Cloud& cloud);
+  void ObserveIntegration(Lane& lane, const Cloud& cloud,
+                          std::chrono::steady_clock::time_point start, MapStatus status);
   // One renderer step (sealed period first, else an open period); false if there was nothing
   // to do.
   bool RenderStep();
   void CommitSealed(Sealed sealed);
   bool RenderOpen(Lane& lane);
   void PublishLocked();
+  void ObserveQueryable();  // under map_mutex_, after a publication
   Lane* LaneOf(const std::string& sensor_id) const;
 
   WorkerOptions options_;

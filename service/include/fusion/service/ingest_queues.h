@@ -79,6 +79,8 @@ class IngestQueues {
   bool PopAll(std::vector<Cloud>* out, std::chrono::steady_clock::time_point until);
   void Wake();
   [[nodiscard]] std::size_t Pending() const;
+  // Clouds queued for one sensor (0 for an unknown id).
+  [[nodiscard]] std::size_t Pending(const std::string& sensor_id) const;
   [[nodiscard]] std::size_t queued_bytes() const;
   // What a cloud costs the byte bound: its points and flags.
   [[nodiscard]] static std::size_t BytesOf(const Cloud& cloud);

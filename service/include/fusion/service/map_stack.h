@@ -25,6 +25,8 @@ class MapStack {
   // (a corrupt one is set aside and logged, not an error), starts the worker and the
   // persister. An error when something cannot start.
   [[nodiscard]] Status Start();
+  // Before Start: what the fusion worker observes (metrics.h; default: nothing).
+  void set_worker_histograms(const WorkerHistograms& histograms) { histograms_ = histograms; }
 
   // Shutdown, in three steps around the transports: BeginShutdown refuses new calls and ends the
   // update streams; StopQueries joins the heavy-query pool (after the gRPC server has stopped:
@@ -46,6 +48,7 @@ class MapStack {
   std::function<void(bool)> on_persistence_health_;
   ServiceState state_;
   WorldMapOptions map_options_;
+  WorkerHistograms histograms_;
   std::unique_ptr<IngestQueues> queues_;
   std::unique_ptr<SnapshotHub> hub_;
   std::unique_ptr<FusionWorker> worker_;

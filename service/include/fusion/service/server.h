@@ -27,6 +27,8 @@ class FusionServer {
   [[nodiscard]] Status Start();
   // Port actually bound (useful with port 0).
   [[nodiscard]] int port() const { return port_; }
+  // Port of the metrics endpoint (0: metrics off).
+  [[nodiscard]] int metrics_port() const;
   // Stops serving (streams end, running calls get the deadline), leaves DDS, integrates what
   // is queued, writes the final snapshot: an error if that snapshot could not be written.
   [[nodiscard]] Status Shutdown(std::chrono::milliseconds deadline = std::chrono::milliseconds(2000));
