@@ -65,6 +65,7 @@ int Stats(Context& ctx, const Args&) {
   PrintByReason(s.rejected_by_reason(), "  ");
   row("matched_writers", s.matched_writers());
   row("matched_writers_total", s.matched_writers_total());
+  row("changes_detected", s.changes_detected());
   row("renders", s.renders());
   row("snapshots_saved", s.snapshots_saved());
   row("snapshots_failed", s.snapshots_failed());

@@ -52,6 +52,14 @@ bool BeamGridOptions::IsValid(std::string* why) const {
     out = "cell_size_m must lie in [0.0001, 1] m";
     return false;
   }
+  if (change_run > 100) {
+    out = "change_run must lie in 0..100 (0: off)";
+    return false;
+  }
+  if (!(change_min_mass > 0.0 && change_min_mass < 1.0)) {
+    out = "change_min_mass must lie in (0, 1)";
+    return false;
+  }
   if (!(prior_cell_occupancy < 0.0 || (prior_cell_occupancy > 0.0 && prior_cell_occupancy < 1.0))) {
     out = "prior_cell_occupancy must lie in (0, 1), or be negative (from the reference length)";
     return false;

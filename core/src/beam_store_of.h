@@ -53,6 +53,7 @@ class BeamStoreOf final : public BeamStore {
   void Reset() override {
     for (Beam& b : beams_) b.Reset(*ctx_);
   }
+  void ResetBeam(std::size_t beam) override { beams_[beam].Reset(*ctx_); }
   std::size_t MemoryBytes() const override {
     std::size_t bytes = sizeof(*this) + (beams_.capacity() - beams_.size()) * sizeof(Beam);
     for (const Beam& b : beams_) bytes += b.MemoryBytes();

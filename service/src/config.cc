@@ -197,6 +197,8 @@ fusion::v1::ServiceConfig DefaultConfig() {
   map->set_occupied_threshold(kServiceOccupiedThreshold);
   map->set_free_threshold(kServiceFreeThreshold);
   map->set_beam_cell_size_m(kServiceBeamCellSizeM);
+  map->set_change_detection_run(BeamGridOptions::kDefaultChangeRun);
+  map->set_change_detection_min_mass(BeamGridOptions::kDefaultChangeMinMass);
   auto* ingest = config.mutable_ingest();
   ingest->set_reliability("best_effort");
   ingest->set_max_points(4'000'000);

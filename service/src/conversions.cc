@@ -30,6 +30,8 @@ std::string MapConfigError(const std::string& why) {
   static const Field kFields[] = {
       {"pose_tolerance_rad", "pose_tolerance_deg", ""},
       {"beam_grid.cell_size_m", "beam_cell_size_m", ""},
+      {"beam_grid.change_run", "change_detection_run", ""},
+      {"beam_grid.change_min_mass", "change_detection_min_mass", ""},
       {"render.max_range_m", "max_range_m", " (0: each sensor's full range)"},
       {"render.threads", "render_threads", " (0: one fewer than the hardware threads, at least 1)"},
       {"occupancy_threshold", "occupied_threshold", ""},
@@ -158,6 +160,8 @@ StatusOr<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig&
   options.pose_tolerance_m = c.pose_tolerance_m();
   options.pose_tolerance_rad = c.pose_tolerance_deg() * kDegToRad;
   options.beam_grid.cell_size_m = c.beam_cell_size_m();
+  options.beam_grid.change_run = c.change_detection_run();
+  options.beam_grid.change_min_mass = c.change_detection_min_mass();
   options.render.resolution_m = options.resolution_m;
   options.occupancy_threshold = c.occupied_threshold();
   // 0: each sensor's full range (core's default); anything else, negative and NaN included,

@@ -193,6 +193,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   SensorCountersAtomic& c = *lane->counters;
   c.integrated.fetch_add(1, std::memory_order_relaxed);
   if (result.merged) c.merged.fetch_add(1, std::memory_order_relaxed);
+  c.changes_detected.fetch_add(result.stats.changes_detected, std::memory_order_relaxed);
   c.points_updated.fetch_add(result.stats.updated, std::memory_order_relaxed);
   c.points_beyond_range.fetch_add(result.stats.beyond_range, std::memory_order_relaxed);
   c.points_missing.fetch_add(result.stats.missing, std::memory_order_relaxed);

@@ -33,13 +33,15 @@ grpc::ServerUnaryReactor* MapService::GetStats(grpc::CallbackServerContext* cont
     reply->set_map_version(snapshot->version);
     reply->set_uptime_s(
         std::chrono::duration<double>(std::chrono::steady_clock::now() - state_->start).count());
-    std::uint64_t received = 0, dropped = 0, memory = 0;
+    std::uint64_t received = 0, dropped = 0, memory = 0, changes = 0;
     for (const auto& id : state_->queues->SensorIds()) {
       const auto* c = state_->queues->counters(id);
       received += c->received;
       dropped += c->dropped;
       memory += c->memory_bytes;
+      changes += c->changes_detected;
     }
+    reply->set_changes_detected(changes);
     const auto& rejected = state_->queues->all_rejected();
     reply->set_clouds_received(received + rejected.Total());
     reply->set_clouds_rejected(rejected.Total());
@@ -212,6 +214,7 @@ grpc::ServerUnaryReactor* MapService::ListSensors(grpc::CallbackServerContext* c
       out->set_dropped(c->dropped);
       out->set_integrated(c->integrated);
       out->set_merged(c->merged);
+      out->set_changes_detected(c->changes_detected);
       out->set_points_updated(c->points_updated);
       out->set_points_beyond_range(c->points_beyond_range);
       out->set_points_missing(c->points_missing);

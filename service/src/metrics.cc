@@ -96,6 +96,9 @@ class StateCollector final : public prometheus::Collectable {
     FamilyBuilder merged("fusiond_clouds_merged_total",
                          "Clouds merged into an open period while the renderer was behind",
                          counter);
+    FamilyBuilder changes("fusiond_changes_detected_total",
+                          "Beams restarted because their readings said the world changed",
+                          counter);
     FamilyBuilder rejected("fusiond_clouds_rejected_total",
                            "Samples rejected before integration, by sensor id and reason", counter);
     FamilyBuilder queue("fusiond_ingest_queue_clouds",
@@ -113,6 +116,7 @@ class StateCollector final : public prometheus::Collectable {
       integrated.Add(static_cast<double>(c.integrated.load()), {{"sensor", id}});
       dropped.Add(static_cast<double>(c.dropped.load()), {{"sensor", id}});
       merged.Add(static_cast<double>(c.merged.load()), {{"sensor", id}});
+      changes.Add(static_cast<double>(c.changes_detected.load()), {{"sensor", id}});
       queue.Add(static_cast<double>(queues.Pending(id)), {{"sensor", id}});
       grid_bytes.Add(static_cast<double>(c.memory_bytes.load()), {{"sensor", id}});
       for (std::size_t i = 0; i < kRejectReasonCount; ++i) {
@@ -138,8 +142,8 @@ class StateCollector final : public prometheus::Collectable {
                               "Bytes of the clouds waiting for the fusion worker",
                               MetricType::Gauge);
     queue_bytes.Add(static_cast<double>(queues.queued_bytes()));
-    for (FamilyBuilder* f : {&received, &integrated, &dropped, &merged, &rejected, &queue,
-                             &queue_bytes, &grid_bytes}) {
+    for (FamilyBuilder* f : {&received, &integrated, &dropped, &merged, &changes, &rejected,
+                             &queue, &queue_bytes, &grid_bytes}) {
       out->push_back(std::move(f->family));
     }
   }

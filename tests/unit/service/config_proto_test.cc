@@ -107,6 +107,8 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
       {"limits { max_heavy_queries: 65 }", "limits.max_heavy_queries"},
       {"limits { heavy_query_nice: 5 }", "limits.heavy_query_nice"},
       {"ingest { max_queued_mb: 8 }", "ingest.max_queued_mb"},
+      {"map { change_detection_run: 101 }", "map.change_detection_run"},
+      {"map { change_detection_min_mass: 1.5 }", "map.change_detection_min_mass"},
       {"metrics { listen_address: \"localhost:9464\" }", "metrics.listen_address"},
       {"metrics { listen_address: \"127.0.0.1\" }", "metrics.listen_address"},
       {"metrics { listen_address: \"127.0.0.1:65536\" }", "metrics.listen_address"},

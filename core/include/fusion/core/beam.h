@@ -236,6 +236,7 @@ class BeamStore {
                                                  double tail_fraction, double free_ratio) const = 0;
   [[nodiscard]] virtual bool Touched(std::size_t beam) const = 0;
   virtual void Reset() = 0;
+  virtual void ResetBeam(std::size_t beam) = 0;  // back to the prior
   [[nodiscard]] virtual std::size_t MemoryBytes() const = 0;  // beams only, not the context
 };
 

@@ -32,6 +32,19 @@ struct BeamGridOptions {
   double prior_reference_length_m = kDefaultPriorReferenceLengthM;
   BeamRepresentation representation = kDefaultRepresentation;
 
+  // Change detection (docs/mapping.md, "A world that changes"). Once a beam has taken
+  // change_run readings since it (re)started, a reading is surprising when the beam's p(B)
+  // puts less than change_min_mass on the cells its forward model can explain it from (the
+  // outcome's ROI: mu +- Delta sigma, bias included): the posterior calls it nearly impossible
+  // but for the outlier floor. change_run surprising readings in a row restart the beam at its
+  // prior before the reading is applied (0: off). Under the model's own noise a reading is
+  // surprising about as often as it falls outside Delta sigma (0.27 % at 3 sigma), so 3 in a
+  // row happen ~2e-8 times per reading; a surface moved by 2 Delta sigma trips every reading.
+  static constexpr std::uint32_t kDefaultChangeRun = 0;
+  static constexpr double kDefaultChangeMinMass = 1e-3;
+  std::uint32_t change_run = kDefaultChangeRun;
+  double change_min_mass = kDefaultChangeMinMass;
+
   // True if a beam grid can be built with these options; else false, and *why (if not null)
   // says what is wrong, starting with the field's name ("cell_size_m must lie in ...").
   [[nodiscard]] bool IsValid(std::string* why = nullptr) const;
@@ -45,6 +58,8 @@ struct IntegrationStats {
   std::size_t rejected_nonfinite = 0;  // inf or mixed NaN coordinates
   std::size_t rejected_outside_fov = 0;
   std::size_t rejected_outside_map = 0;  // world position beyond the map's keys (SensorPeriods)
+  // Not a point count: beams restarted because the world changed (BeamGridOptions::change_run).
+  std::size_t changes_detected = 0;
 };
 
 // Where a beam's information lies, from a start range on (BeamGrid::Profile).

@@ -34,6 +34,7 @@ struct SensorCountersAtomic {
   std::atomic<std::uint64_t> integrated{0};
   std::atomic<std::uint64_t> merged{0};    // integrated into an open period from beyond its pose
                                            // tolerance (the renderer was behind)
+  std::atomic<std::uint64_t> changes_detected{0};  // beams restarted: the world changed
   std::atomic<std::uint64_t> points_updated{0};
   std::atomic<std::uint64_t> points_beyond_range{0};
   std::atomic<std::uint64_t> points_missing{0};
