@@ -14,6 +14,7 @@
 #include "connection.h"
 #include "fusion/clients/cli.h"
 #include "fusion/v1/map_service.grpc.pb.h"
+#include "fusion/wire/status_names.h"
 
 namespace google::protobuf {
 class Message;
@@ -65,8 +66,8 @@ grpc::Status Call(const Context& ctx,
   PrepareCall(ctx, &context, ctx.timeout_s);
   return (ctx.stub.get()->*method)(&context, request, reply);
 }
-// "OK", "INVALID_ARGUMENT", ... (grpc::StatusCode's names).
-const char* StatusCodeName(int code);
+// "OK", "INVALID_ARGUMENT", ... (grpc::StatusCode's names; the wire's one table).
+using fusion::wire::StatusCodeName;
 // Reports a failed call: unreachable service, deadline or the service's error with its status
 // name and detail; returns kExitFailure.
 int Failed(const Context& ctx, const grpc::Status& status);

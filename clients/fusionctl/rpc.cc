@@ -91,29 +91,6 @@ void PrepareCall(const Context& ctx, grpc::ClientContext* context, double timeou
   AddBearerToken(ctx.bearer_token, context);
 }
 
-const char* StatusCodeName(int code) {
-  // grpc::StatusCode's values are 0..16 in this order (grpc/status.h, fixed by the protocol).
-  static const char* const kNames[] = {"OK",
-                                       "CANCELLED",
-                                       "UNKNOWN",
-                                       "INVALID_ARGUMENT",
-                                       "DEADLINE_EXCEEDED",
-                                       "NOT_FOUND",
-                                       "ALREADY_EXISTS",
-                                       "PERMISSION_DENIED",
-                                       "RESOURCE_EXHAUSTED",
-                                       "FAILED_PRECONDITION",
-                                       "ABORTED",
-                                       "OUT_OF_RANGE",
-                                       "UNIMPLEMENTED",
-                                       "INTERNAL",
-                                       "UNAVAILABLE",
-                                       "DATA_LOSS",
-                                       "UNAUTHENTICATED"};
-  const auto index = static_cast<std::size_t>(code);
-  return index < std::size(kNames) ? kNames[index] : "UNKNOWN_STATUS";
-}
-
 int Failed(const Context& ctx, const grpc::Status& status) {
   const std::string name = StatusCodeName(status.error_code());
   const std::string& server = ctx.connection.server;

@@ -14,6 +14,7 @@
 #include <mutex>
 
 #include "fusion/service/map_service.h"
+#include "fusion/wire/status_names.h"
 
 namespace fusion::service {
 namespace {
@@ -31,28 +32,6 @@ prometheus::Histogram::BucketBoundaries Exponential(double first, double factor,
   prometheus::Histogram::BucketBoundaries bounds;
   for (double bound = first; count-- > 0; bound *= factor) bounds.push_back(bound);
   return bounds;
-}
-
-const char* StatusCodeName(grpc::StatusCode code) {
-  static const char* const kNames[] = {"OK",
-                                       "CANCELLED",
-                                       "UNKNOWN",
-                                       "INVALID_ARGUMENT",
-                                       "DEADLINE_EXCEEDED",
-                                       "NOT_FOUND",
-                                       "ALREADY_EXISTS",
-                                       "PERMISSION_DENIED",
-                                       "RESOURCE_EXHAUSTED",
-                                       "FAILED_PRECONDITION",
-                                       "ABORTED",
-                                       "OUT_OF_RANGE",
-                                       "UNIMPLEMENTED",
-                                       "INTERNAL",
-                                       "UNAVAILABLE",
-                                       "DATA_LOSS",
-                                       "UNAUTHENTICATED"};
-  const int index = static_cast<int>(code);
-  return index >= 0 && index < 17 ? kNames[index] : "UNKNOWN";
 }
 
 // A family of the scrape-time metrics, one sample added per call of Add.
@@ -212,7 +191,8 @@ class RpcInterceptor final : public grpc::experimental::Interceptor {
     using grpc::experimental::InterceptionHookPoints;
     if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_STATUS)) {
       const double seconds = std::chrono::duration<double>(Clock::now() - start_).count();
-      const char* code = StatusCodeName(methods->GetSendStatus().error_code());
+      const char* code =
+          fusion::wire::StatusCodeName(static_cast<int>(methods->GetSendStatus().error_code()));
       metrics_->calls->Add({{"service", service_}, {"method", method_}, {"code", code}})
           .Increment();
       metrics_->seconds
