@@ -97,6 +97,22 @@ void BM_IntegrateSr3000Frame(benchmark::State& state) {
 }
 BENCHMARK(BM_IntegrateSr3000Frame)->Unit(benchmark::kMillisecond);
 
+// The same with change detection on (BeamGridOptions::change_run = 3): every reading of a
+// confident beam costs one tail-mass query first (docs/mapping.md, "A world that changes").
+void BM_IntegrateSr3000FrameChangeDetection(benchmark::State& state) {
+  const Fixture& f = SharedFixture();
+  fusion::BeamGridOptions options = GridOptions();
+  options.change_run = 3;
+  fusion::BeamGrid grid(f.sr.spec, options);
+  std::size_t i = 0, changes = 0;
+  for (auto _ : state) {
+    const auto& cloud = f.frames[i++ % f.frames.size()];
+    changes += grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range).changes_detected;
+  }
+  state.counters["changes"] = static_cast<double>(changes);  // a static scene: expect 0
+}
+BENCHMARK(BM_IntegrateSr3000FrameChangeDetection)->Unit(benchmark::kMillisecond);
+
 // Renders (fusion::Render) a beam grid of `clouds` seen from T, timed, with the render's counts.
 void RenderFrames(benchmark::State& state, const fusion::SensorSpec& spec,
                   const std::vector<fusion::sim::OrganizedCloud>& clouds,
