@@ -30,80 +30,82 @@ struct BeamGrid::Impl {
   std::unique_ptr<BeamStore> store;
   std::vector<BeamStore::BeamOutcome> scratch;  // reused by Integrate / UpdateEachBeam
   // Change detection (BeamGridOptions::change_run), per beam: whether a reading has found the
-  // beam's p(B) holding it (mass >= kConfidentMass) since the beam (re)started, the surprising
-  // readings in a row (low bits) and those readings' outcomes, held back until the run ends.
+  // beam's p(B) holding it (ROI mass >= kConfidentMass) since the beam (re)started, the
+  // surprising readings in a row (up to 100, in the low bits) and those readings' outcomes.
   static constexpr std::uint8_t kConfident = 0x80;
   static constexpr double kConfidentMass = 0.5;
   std::vector<std::uint8_t> state;
-  std::vector<std::uint32_t> held;  // change_run - 1 per beam
-  std::vector<BeamStore::BeamOutcome> kept;
-  std::vector<std::uint32_t> roi_cells;  // RoiMass' scratch
-  std::vector<double> roi_tails;
+  std::vector<std::uint32_t> held;    // change_run - 1 per beam
+  std::vector<double> masses;         // each update's ROI mass (BeamStore::UpdateMany)
+  std::vector<std::uint8_t> restarted;  // beams restarted in the batch being judged
+  std::vector<std::uint32_t> restarted_beams;
 
-  // p(B) mass on the outcome's ROI, normalised; negative when the model has no ROI for it.
-  double RoiMass(std::uint32_t beam, std::uint32_t outcome);
-  // The updates to apply: a confident beam's surprising readings are held back; a run of
-  // change_run of them restarts the beam, which then takes the run; a shorter run is dropped
-  // (outliers). `todo` itself when change detection is off.
-  const std::vector<BeamStore::BeamOutcome>& DetectChanges(
-      const std::vector<BeamStore::BeamOutcome>& todo, IntegrationStats* stats);
+  // Applies the updates in order. With change detection on, each reading is judged by its ROI
+  // mass under the posterior it met (the update's own by-product): a confident beam's
+  // surprising readings count in a row, and change_run of them restart the beam at its prior,
+  // which then takes the run again; any other reading ends the run. Surprising readings are
+  // applied like every other (the model's outlier floor accounts for the odd one).
+  void Apply(const std::vector<BeamStore::BeamOutcome>& todo, IntegrationStats* stats);
+  // One reading judged; `mass` is its ROI mass. Restarts the beam at the end of a run.
+  void Judge(const BeamStore::BeamOutcome& u, double mass, IntegrationStats* stats);
 
   void CheckBeam(std::size_t beam) const {
     if (beam >= store->beam_count()) throw std::out_of_range("beam index out of range");
   }
 };
 
-double BeamGrid::Impl::RoiMass(std::uint32_t beam, std::uint32_t outcome) {
-  const std::size_t n = context->cell_count();  // cell n is B_{N+1}
-  if (outcome == context->disc().beyond_outcome()) {  // explained by B_{N+1} alone
-    roi_cells.assign({0u, static_cast<std::uint32_t>(n)});
-    store->TailMasses(beam, roi_cells, &roi_tails);
-    return roi_tails[1] / roi_tails[0];
-  }
-  const BeamContext::RoiFactors roi = context->Roi(outcome);
-  if (roi.end <= roi.begin) return -1.0;
-  // S(c): p(B) mass of the cells from c on (B_{N+1} included); S(N + 1) = 0.
-  roi_cells.assign({0u, static_cast<std::uint32_t>(roi.begin)});
-  if (roi.end <= n) roi_cells.push_back(static_cast<std::uint32_t>(roi.end));
-  store->TailMasses(beam, roi_cells, &roi_tails);
-  const double after = roi.end <= n ? roi_tails[2] : 0.0;
-  return (roi_tails[1] - after) / roi_tails[0];
-}
-
-const std::vector<BeamStore::BeamOutcome>& BeamGrid::Impl::DetectChanges(
-    const std::vector<BeamStore::BeamOutcome>& todo, IntegrationStats* stats) {
+void BeamGrid::Impl::Apply(const std::vector<BeamStore::BeamOutcome>& todo,
+                           IntegrationStats* stats) {
   const std::uint32_t limit = options.change_run;
-  if (limit == 0) return todo;
+  if (limit == 0) {
+    store->UpdateMany(todo.data(), todo.size(), nullptr);
+    return;
+  }
   if (state.empty()) {
     state.assign(store->beam_count(), 0);
     held.assign(store->beam_count() * (limit - 1), 0);
+    restarted.assign(store->beam_count(), 0);
   }
-  kept.clear();
-  for (const BeamStore::BeamOutcome& u : todo) {
-    std::uint8_t& s = state[u.beam];
-    const double mass = RoiMass(u.beam, u.outcome);
-    const bool confident = (s & kConfident) != 0;
-    if (!confident || !(mass >= 0.0 && mass < options.change_min_mass)) {
-      // Expected (or nothing to contradict yet): apply it; a run of surprises before it was
-      // outliers, dropped.
-      s = mass >= kConfidentMass ? kConfident : (s & kConfident);
-      kept.push_back(u);
-      continue;
-    }
-    const std::uint32_t run = s & ~kConfident;
-    if (run + 1 < limit) {  // held back: an outlier, or the start of a change
-      held[u.beam * (limit - 1) + run] = u.outcome;
-      s = static_cast<std::uint8_t>(kConfident | (run + 1));
-      continue;
-    }
-    // The world changed along this beam: restart it and give it the run of readings.
-    store->ResetBeam(u.beam);
-    ++stats->changes_detected;
-    s = 0;
-    for (std::uint32_t k = 0; k + 1 < limit; ++k) kept.push_back({u.beam, held[u.beam * (limit - 1) + k]});
-    kept.push_back(u);
+  masses.resize(todo.size());
+  store->UpdateMany(todo.data(), todo.size(), masses.data());
+  // The batch was applied beam by beam in order; a beam restarted at update k lost the updates
+  // after k that UpdateMany had applied before, so those are applied again, in order.
+  for (std::size_t k = 0; k < todo.size(); ++k) {
+    const BeamStore::BeamOutcome& u = todo[k];
+    const double mass = restarted[u.beam] != 0 ? store->Update(u.beam, u.outcome) : masses[k];
+    Judge(u, mass, stats);
   }
-  return kept;
+  for (const std::uint32_t beam : restarted_beams) restarted[beam] = 0;
+  restarted_beams.clear();
+}
+
+void BeamGrid::Impl::Judge(const BeamStore::BeamOutcome& u, double mass, IntegrationStats* stats) {
+  const std::uint32_t limit = options.change_run;
+  std::uint8_t& s = state[u.beam];
+  const bool confident = (s & kConfident) != 0;
+  if (!confident || !(mass >= 0.0 && mass < options.change_min_mass)) {
+    s = (confident || mass >= kConfidentMass) ? kConfident : 0;  // expected: the run ends
+    return;
+  }
+  const std::uint32_t run = s & ~kConfident;
+  if (run + 1 < limit) {  // an outlier, or the start of a change
+    held[u.beam * (limit - 1) + run] = u.outcome;
+    s = static_cast<std::uint8_t>(kConfident | (run + 1));
+    return;
+  }
+  // The world changed along this beam: restart it and give it the run of readings.
+  store->ResetBeam(u.beam);
+  ++stats->changes_detected;
+  bool believes = false;
+  for (std::uint32_t k = 0; k + 1 < limit; ++k) {
+    believes |= store->Update(u.beam, held[u.beam * (limit - 1) + k]) >= kConfidentMass;
+  }
+  believes |= store->Update(u.beam, u.outcome) >= kConfidentMass;
+  s = believes ? kConfident : 0;
+  if (restarted[u.beam] == 0) {
+    restarted[u.beam] = 1;
+    restarted_beams.push_back(u.beam);
+  }
 }
 
 BeamGrid::BeamGrid(const SensorSpec& spec, const BeamGridOptions& options)
@@ -184,8 +186,7 @@ IntegrationStats BeamGrid::Integrate(const float* points_xyz, std::size_t point_
       ++stats.updated;
     }
   }
-  const auto& apply = impl_->DetectChanges(todo, &stats);
-  impl_->store->UpdateMany(apply.data(), apply.size());
+  impl_->Apply(todo, &stats);
   return stats;
 }
 
@@ -212,8 +213,7 @@ IntegrationStats BeamGrid::UpdateEachBeam(const std::vector<Reading>& readings) 
       ++stats.updated;
     }
   }
-  const auto& apply = impl_->DetectChanges(todo, &stats);
-  impl_->store->UpdateMany(apply.data(), apply.size());
+  impl_->Apply(todo, &stats);
   return stats;
 }
 

@@ -20,15 +20,16 @@ class BeamStoreOf final : public BeamStore {
     for (std::size_t b = 0; b < beams; ++b) beams_.emplace_back(*ctx_);
   }
   std::size_t beam_count() const override { return beams_.size(); }
-  void Update(std::size_t beam, std::size_t outcome) override {
-    beams_[beam].Update(*ctx_, outcome);
+  double Update(std::size_t beam, std::size_t outcome) override {
+    return beams_[beam].Update(*ctx_, outcome);
   }
-  void UpdateMany(const BeamOutcome* updates, std::size_t count) override {
+  void UpdateMany(const BeamOutcome* updates, std::size_t count, double* roi_masses) override {
     constexpr std::size_t kAhead = 4;
     for (std::size_t k = 0; k < count && k < kAhead; ++k) beams_[updates[k].beam].Prefetch();
     for (std::size_t k = 0; k < count; ++k) {
       if (k + kAhead < count) beams_[updates[k + kAhead].beam].Prefetch();
-      beams_[updates[k].beam].Update(*ctx_, updates[k].outcome);
+      const double mass = beams_[updates[k].beam].Update(*ctx_, updates[k].outcome);
+      if (roi_masses != nullptr) roi_masses[k] = mass;
     }
   }
   void Weights(std::size_t beam, std::vector<double>* weights) const override {

@@ -19,8 +19,20 @@ void DenseBeam::Reset(const BeamContext& ctx) {
   touched_ = false;
 }
 
-void DenseBeam::Update(const BeamContext& ctx, std::size_t outcome) {
+double DenseBeam::Update(const BeamContext& ctx, std::size_t outcome) {
   const ForwardModel& model = ctx.model();
+  // The ROI mass before the update, of the visible mass (blind cells hold none once touched).
+  const std::size_t n = ctx.cell_count();
+  double visible = 0.0;
+  for (std::size_t i = std::min(ctx.disc().first_visible_cell, n); i <= n; ++i) visible += p_[i];
+  double roi_sum = -1.0;
+  if (outcome == ctx.disc().beyond_outcome()) {
+    roi_sum = p_[n];
+  } else if (const BeamContext::RoiFactors roi = ctx.Roi(outcome); roi.end > roi.begin) {
+    roi_sum = 0.0;
+    for (std::size_t i = roi.begin; i < roi.end; ++i) roi_sum += p_[i];
+  }
+  const double mass = roi_sum < 0.0 ? -1.0 : roi_sum / visible;
   double sum = 0.0;
   for (std::size_t i = 0; i < p_.size(); ++i) {
     p_[i] *= model.Probability(i, outcome);  // Eq. 11 numerator
@@ -30,10 +42,11 @@ void DenseBeam::Update(const BeamContext& ctx, std::size_t outcome) {
   if (!(sum > 0.0) || !std::isfinite(sum)) {  // impossible outcome under p(B): start afresh
     Reset(ctx);
     touched_ = true;
-    return;
+    return mass;
   }
   const double eta = 1.0 / sum;  // Eq. 11 normaliser
   for (double& p : p_) p *= eta;
+  return mass;
 }
 
 void DenseBeam::Weights(const BeamContext& /*ctx*/, std::vector<double>* weights) const {

@@ -101,7 +101,7 @@ std::size_t UllBeam::Explode(const BeamContext& ctx, std::size_t begin, std::siz
   return Find(begin);
 }
 
-void UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
+double UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
   if (!touched_) {
     // Blind cells have p(r | B_i) = 0 for every outcome: the first reading zeroes them.
     const std::size_t visible = ctx.disc().first_visible_cell;
@@ -114,6 +114,7 @@ void UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
     touched_ = true;
   }
   double delta = 0.0;
+  double roi_sum = -1.0;  // the ROI's weights before the update; -1: no ROI
   const BeamContext::RoiFactors roi = ctx.Roi(outcome);
   if (roi.end > roi.begin) {
     if (!(roi.begin >= ec_first_ && roi.end <= ec_end_)) {
@@ -130,6 +131,8 @@ void UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
       const double* f = roi.factors;
       V2 d01 = {0.0, 0.0};
       V2 d23 = {0.0, 0.0};
+      V2 s01 = {0.0, 0.0};
+      V2 s23 = {0.0, 0.0};
       const V2 one = {1.0, 1.0};
       std::size_t t = 0;
       for (; t + 4 <= len; t += 4) {
@@ -138,6 +141,8 @@ void UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
         std::memcpy(&b, v + t + 2, sizeof b);
         std::memcpy(&fa, f + t, sizeof fa);
         std::memcpy(&fb, f + t + 2, sizeof fb);
+        s01 += a;
+        s23 += b;
         d01 += a * (fa - one);
         d23 += b * (fb - one);
         a *= fa;
@@ -146,26 +151,34 @@ void UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
         std::memcpy(v + t + 2, &b, sizeof b);
       }
       double tail = 0.0;
+      double tail_sum = 0.0;
       for (; t < len; ++t) {
         const double old = v[t];
         v[t] = old * f[t];
         tail += old * (f[t] - 1.0);
+        tail_sum += old;
       }
       delta = ((d01[0] + tail) + d01[1]) + (d23[0] + d23[1]);
+      roi_sum = ((s01[0] + tail_sum) + s01[1]) + (s23[0] + s23[1]);
     } else {
+      roi_sum = 0.0;
       for (std::size_t t = 0; t < len; ++t) {
         const double old = v[t];
         v[t] = old * ctx.Factor(roi.begin + t, outcome);
         delta += v[t] - old;
+        roi_sum += old;
       }
     }
   }
+  if (outcome == ctx.disc().beyond_outcome()) roi_sum = w_all_free_;  // B_{N+1} alone
+  const double mass = roi_sum < 0.0 ? -1.0 : roi_sum / total_;
   const double g = ctx.AllFreeFactor(outcome);
   const double old_free = w_all_free_;
   w_all_free_ *= g;
   delta += w_all_free_ - old_free;
   total_ += delta;
   if (!(total_ >= kLowTotal && total_ <= kHighTotal)) Renormalise(ctx);
+  return mass;
 }
 
 void UllBeam::Renormalise(const BeamContext& ctx) {

@@ -63,6 +63,15 @@ bool WorldMapOptions::IsValid(std::string* why) const {
         "clamping_min_probability and clamping_max_probability must satisfy 0 < min < "
         "max < 1");
   }
+  if (!(history_clamping_max_probability > clamping_min_probability &&
+        history_clamping_max_probability <= clamping_max_probability)) {
+    return fail(
+        "history_clamping_max_probability must lie in (clamping_min_probability, "
+        "clamping_max_probability]");
+  }
+  if (!(forget_half_life_s >= 0.0 && std::isfinite(forget_half_life_s))) {
+    return fail("forget_half_life_s must be finite and >= 0 (0: never forget)");
+  }
   if (!(occupancy_threshold > 0.0 && occupancy_threshold < 1.0)) {
     return fail("occupancy_threshold must lie in (0, 1)");
   }
@@ -92,6 +101,8 @@ WorldMap::WorldMap(const WorldMapOptions& options)
     : options_(options),
       policy_(FusionPolicy::Make(options.rule, options.clamping_min_probability,
                                  options.clamping_max_probability)),
+      history_policy_(FusionPolicy::Make(options.rule, options.clamping_min_probability,
+                                         options.history_clamping_max_probability)),
       render_(MapRenderOptions(options)),
       committed_(NewTree(options)),
       published_(NewTree(options)) {
@@ -181,24 +192,35 @@ MapStatus WorldMap::CommitLive(const std::string& sensor_id) {
   SensorState* s = Find(sensor_id);
   if (s == nullptr) return MapStatus::kUnknownSensor;
   if (s->live.empty()) return MapStatus::kOk;
-  FuseRegions(*committed_, policy_, {{committed_.get(), nullptr}, {nullptr, &s->live}}, {&s->live});
+  FuseRegions(*committed_, history_policy_, {{committed_.get(), nullptr}, {nullptr, &s->live}},
+              {&s->live});
   RenderedGrid old = std::move(s->live);
   s->live = RenderedGrid(options_.resolution_m);
   s->counters.live_nodes = 0;
   // Where no other live contribution overlaps, the map already holds what the history now
-  // holds: both are Fuse(history before, this contribution).
-  if (Sources(nullptr).size() > 1) {
-    const std::size_t before = pending_.size();
-    FuseRegions(Working(), policy_, Sources(nullptr), {&old}, &pending_);
-    MergeRun(before);
+  // holds (both are Fuse(history before, this contribution)) except where the history's
+  // tighter occupied clamp cut it: there the contribution was positive, since the history
+  // never holds more than its clamp.
+  const RenderedGrid* refuse = &old;
+  RenderedGrid positive(options_.resolution_m);
+  if (Sources(nullptr).size() == 1) {
+    if (history_policy_.clamp_max_log_odds >= policy_.clamp_max_log_odds) return MapStatus::kOk;
+    for (const MapNode& node : old.nodes()) {
+      if (node.log_odds > 0.0f) positive.Append(node);
+    }
+    if (positive.empty()) return MapStatus::kOk;
+    refuse = &positive;
   }
+  const std::size_t before = pending_.size();
+  FuseRegions(Working(), policy_, Sources(nullptr), {refuse}, &pending_);
+  MergeRun(before);
   return MapStatus::kOk;
 }
 
 void WorldMap::LoadHistory(const octomap::OcTree& history) {
   Reset();
   const RenderedGrid all = Everything(options_.resolution_m);
-  FuseRegions(*committed_, policy_, {{&history, nullptr}}, {&all});
+  FuseRegions(*committed_, history_policy_, {{&history, nullptr}}, {&all});
   working_ = std::make_shared<octomap::OcTree>(*committed_);
 }
 
@@ -244,6 +266,31 @@ std::uint64_t WorldMap::ClearBox(const Eigen::AlignedBox3d& box_world) {
   FuseRegions(Working(), policy_, Sources(nullptr), {&drivers}, &pending_);
   MergeRun(before);
   return voxels;
+}
+
+std::uint64_t WorldMap::Forget(double elapsed_s) {
+  if (!(options_.forget_half_life_s > 0.0) || !(elapsed_s > 0.0)) return 0;
+  const auto factor = static_cast<float>(std::exp2(-elapsed_s / options_.forget_half_life_s));
+  // Scaling every node (inner ones hold the maximum of their children) keeps the tree's
+  // invariants: the maximum of scaled values is the scaled maximum, equal siblings stay equal.
+  for (auto it = committed_->begin_tree(); it != committed_->end_tree(); ++it) {
+    it->setLogOdds(it->getLogOdds() * factor);
+  }
+  RenderedGrid forgotten(options_.resolution_m);
+  ForEachInRegion(*committed_, {0, 0},
+                  [&forgotten](const octomap::OcTreeKey& key, unsigned depth,
+                               const octomap::OcTreeNode* node) {
+                    if (node != nullptr && std::abs(node->getLogOdds()) < WorldMapOptions::kForgottenLogOdds) {
+                      forgotten.Append({MortonAtDepth(MortonOf(key), depth), 0.0f,
+                                        static_cast<std::uint8_t>(depth)});
+                    }
+                  });
+  if (!forgotten.empty()) FuseRegions(*committed_, history_policy_, {}, {&forgotten});
+  const RenderedGrid all = Everything(options_.resolution_m);
+  const std::size_t before = pending_.size();
+  FuseRegions(Working(), policy_, Sources(nullptr), {&all}, &pending_);
+  MergeRun(before);
+  return forgotten.size();
 }
 
 void WorldMap::MergeRun(std::size_t run_begin) {

@@ -35,6 +35,7 @@ std::string MapConfigError(const std::string& why) {
       {"render.max_range_m", "max_range_m", " (0: each sensor's full range)"},
       {"render.threads", "render_threads", " (0: one fewer than the hardware threads, at least 1)"},
       {"occupancy_threshold", "occupied_threshold", ""},
+      {"history_clamping_max_probability", "history_clamping_max", ""},
   };
   const std::string core_field = why.substr(0, why.find(' '));
   for (const Field& f : kFields) {
@@ -162,6 +163,8 @@ StatusOr<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig&
   options.beam_grid.cell_size_m = c.beam_cell_size_m();
   options.beam_grid.change_run = c.change_detection_run();
   options.beam_grid.change_min_mass = c.change_detection_min_mass();
+  options.history_clamping_max_probability = c.history_clamping_max();
+  options.forget_half_life_s = c.forget_half_life_s();
   options.render.resolution_m = options.resolution_m;
   options.occupancy_threshold = c.occupied_threshold();
   // 0: each sensor's full range (core's default); anything else, negative and NaN included,

@@ -74,6 +74,7 @@ Status FusionWorker::Start(std::unique_ptr<octomap::OcTree> history) {
   // before the threads that log, so its construction happens before their first use (what the
   // thread sanitizer can see; fusiond's main has logged long before, a test may not have).
   (void)spdlog::default_logger_raw();
+  last_forget_ = std::chrono::steady_clock::now();
   integrator_ = std::thread([this] { IntegratorLoop(); });
   renderer_ = std::thread([this] { RendererLoop(); });
   return Status::Ok();
@@ -283,6 +284,7 @@ bool FusionWorker::RenderStep() {
     return true;
   }
   const auto now = std::chrono::steady_clock::now();
+  if (ForgetStep(now)) return true;
   for (const auto& lane : lanes_) {
     {
       std::lock_guard<std::mutex> lock(work_mutex_);
@@ -296,6 +298,24 @@ bool FusionWorker::RenderStep() {
     }
   }
   return false;
+}
+
+bool FusionWorker::ForgetStep(std::chrono::steady_clock::time_point now) {
+  const double half_life_s = options_.map.forget_half_life_s;
+  if (!(half_life_s > 0.0)) return false;
+  // A twentieth of the half-life (each step re-fuses the whole map), at most once a second
+  // (the renderer wakes that often) and at least once a minute.
+  const auto interval = std::chrono::duration<double>(std::clamp(half_life_s / 20.0, 1.0, 60.0));
+  if (now < last_forget_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(interval)) {
+    return false;
+  }
+  const double elapsed_s = std::chrono::duration<double>(now - last_forget_).count();
+  last_forget_ = now;
+  const std::uint64_t forgotten = map_->Forget(elapsed_s);
+  PublishLocked();
+  spdlog::debug("forgetting: {:.2f} s passed over the history, {} nodes forgotten; version {}",
+                elapsed_s, forgotten, published_version_);
+  return true;
 }
 
 void FusionWorker::CommitSealed(Sealed sealed) {

@@ -142,8 +142,40 @@ TEST_F(ChangeDetectionTest, DenseAndUnrolledBeamsDecideAlike) {
   EXPECT_GE(changes, 32u) << "both changes seen";
 }
 
-TEST_F(ChangeDetectionTest, OffByDefaultAndOptionsChecked) {
-  BeamGrid grid(spec_, BeamGridOptions{});
+// Readings of one beam in one cloud (a depth image mapped onto a coarser tessellation gives
+// several per beam) are judged in order, as if they came one cloud each: a restart in the
+// middle of a cloud keeps the readings after it.
+TEST_F(ChangeDetectionTest, ReadingsOfOneBeamInOneCloudAreJudgedInOrder) {
+  BeamGrid batched(spec_, options_), one_by_one(spec_, options_);
+  const BeamTessellation& beams = batched.tessellation();
+  const std::size_t beam = 5;
+  const Eigen::Vector3d direction = beams.Direction(beam);
+  std::size_t batched_changes = 0, single_changes = 0;
+  for (int cloud = 0; cloud < 6; ++cloud) {
+    const double r_m = cloud < 3 ? 1.3 : 1.6;  // the surface moves by 30 cm
+    std::vector<float> xyz;
+    for (int k = 0; k < 8; ++k) {
+      const double range_m = spec_.q_mu(r_m) + spec_.q_sigma(r_m) * normal_(rng_);
+      for (int a = 0; a < 3; ++a) xyz.push_back(static_cast<float>(direction[a] * range_m));
+    }
+    batched_changes += batched.Integrate(xyz.data(), 8).changes_detected;
+    for (int k = 0; k < 8; ++k) {
+      single_changes += one_by_one.Integrate(xyz.data() + 3 * k, 1).changes_detected;
+    }
+  }
+  EXPECT_EQ(batched_changes, 1u) << "the move restarts the beam once";
+  EXPECT_EQ(single_changes, batched_changes);
+  const std::vector<double> a = batched.FirstHitProbabilities(beam);
+  const std::vector<double> b = one_by_one.FirstHitProbabilities(beam);
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(a[i], b[i], 1e-9) << "cell " << i;
+}
+
+TEST_F(ChangeDetectionTest, OnByDefaultOffWithARunOfZeroAndOptionsChecked) {
+  EXPECT_EQ(BeamGridOptions{}.change_run, kRun);
+  BeamGridOptions off;
+  off.change_run = 0;
+  BeamGrid grid(spec_, off);
   for (int k = 0; k < 30; ++k) (void)grid.UpdateEachBeam(Frame(1.3));
   for (int k = 0; k < 10; ++k) EXPECT_EQ(grid.UpdateEachBeam(Frame(2.0)).changes_detected, 0u);
   BeamGridOptions bad;

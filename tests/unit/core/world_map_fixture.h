@@ -1,5 +1,6 @@
 // The fixture and helpers of the WorldMap tests (world_map_test.cc: input, periods, fusion;
-// world_map_publication_test.cc: what the publications carry, coarse free space, saturation):
+// world_map_publication_test.cc: what the publications carry, coarse free space, saturation;
+// world_map_forgetting_test.cc: the history's clamp, forgetting with a half-life):
 // an SR-3000 at 44 x 36 beams before the paper's board, 4 cm voxels.
 #pragma once
 
@@ -51,6 +52,35 @@ inline void ExpectSameLeaves(const octomap::OcTree& a, const octomap::OcTree& b)
 inline RenderedGrid Opinion(const WorldMap& map, const std::string& id, const Eigen::Isometry3d& T) {
   return Render(*map.beam_grid(id), T, MapRenderOptions(map.options()));
 }
+
+// A client of the change log: applies each publication's regions, as StreamUpdates sends them
+// (ForEachInRegion: the region's leaves, or the region with one value, or nothing), to its own
+// tree.
+class Follower {
+ public:
+  explicit Follower(double resolution_m) : tree_(resolution_m) {}
+  void Apply(const Publication& p) {
+    if (p.changes.reset) tree_.clear();
+    const std::vector<MapRegion> all{{0, 0}};
+    RenderedGrid values(tree_.getResolution()), removed(tree_.getResolution());
+    for (const MapRegion& region : p.changes.reset ? all : p.changes.regions) {
+      ForEachInRegion(*p.tree, region,
+                      [&](const octomap::OcTreeKey& key, unsigned depth,
+                          const octomap::OcTreeNode* node) {
+                        const MapNode n{MortonAtDepth(MortonOf(key), depth),
+                                        node ? node->getLogOdds() : 0.0f,
+                                        static_cast<std::uint8_t>(depth)};
+                        (node ? values : removed).Append(n);
+                      });
+    }
+    // One value per piece (a copy): the policy's clamping is the map's own.
+    FuseRegions(tree_, FusionPolicy{}, {{nullptr, &values}}, {&values, &removed});
+  }
+  const octomap::OcTree& tree() const { return tree_; }
+
+ private:
+  octomap::OcTree tree_;
+};
 
 class WorldMapTest : public ::testing::Test {
  protected:

@@ -7,35 +7,6 @@
 namespace fusion {
 namespace {
 
-// A client of the change log: applies each publication's regions, as StreamUpdates sends them
-// (ForEachInRegion: the region's leaves, or the region with one value, or nothing), to its own
-// tree.
-class Follower {
- public:
-  explicit Follower(double resolution_m) : tree_(resolution_m) {}
-  void Apply(const Publication& p) {
-    if (p.changes.reset) tree_.clear();
-    const std::vector<MapRegion> all{{0, 0}};
-    RenderedGrid values(tree_.getResolution()), removed(tree_.getResolution());
-    for (const MapRegion& region : p.changes.reset ? all : p.changes.regions) {
-      ForEachInRegion(*p.tree, region,
-                      [&](const octomap::OcTreeKey& key, unsigned depth,
-                          const octomap::OcTreeNode* node) {
-                        const MapNode n{MortonAtDepth(MortonOf(key), depth),
-                                        node ? node->getLogOdds() : 0.0f,
-                                        static_cast<std::uint8_t>(depth)};
-                        (node ? values : removed).Append(n);
-                      });
-    }
-    // One value per piece (a copy): the policy's clamping is the map's own.
-    FuseRegions(tree_, FusionPolicy{}, {{nullptr, &values}}, {&values, &removed});
-  }
-  const octomap::OcTree& tree() const { return tree_; }
-
- private:
-  octomap::OcTree tree_;
-};
-
 TEST_F(WorldMapTest, AFollowerOfThePublicationsReproducesTheMapExactly) {
   WorldMap map(options_);
   ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);

@@ -101,8 +101,11 @@ class DenseBeam {
  public:
   explicit DenseBeam(const BeamContext& ctx);
   void Reset(const BeamContext& ctx);
-  // Eq. 11 for one outcome; every cell evaluated through ForwardModel::Probability.
-  void Update(const BeamContext& ctx, std::size_t outcome);
+  // Eq. 11 for one outcome; every cell evaluated through ForwardModel::Probability. Returns
+  // the reading's ROI mass (the change detector's test, BeamGridOptions::change_run): the
+  // p(B) mass before the update on the cells that explain the outcome (its ROI; B_{N+1} for a
+  // beyond-range reading), a fraction of the beam's visible mass; -1 if no cell explains it.
+  double Update(const BeamContext& ctx, std::size_t outcome);
   void Weights(const BeamContext& ctx, std::vector<double>* weights) const;  // N + 1
   // S(c) = mass of cells >= c plus B_{N+1}, for ascending c in [0, N].
   void TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
@@ -145,7 +148,8 @@ class UllBeam {
 
   explicit UllBeam(const BeamContext& ctx);
   void Reset(const BeamContext& ctx);
-  void Update(const BeamContext& ctx, std::size_t outcome);
+  // As DenseBeam::Update (the ROI mass comes out of the update's own loop).
+  double Update(const BeamContext& ctx, std::size_t outcome);
   void Weights(const BeamContext& ctx, std::vector<double>* weights) const;  // N + 1, unnormalised
   void TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
                   std::vector<double>* out) const;
@@ -217,14 +221,16 @@ class BeamStore {
  public:
   virtual ~BeamStore() = default;
   [[nodiscard]] virtual std::size_t beam_count() const = 0;
-  virtual void Update(std::size_t beam, std::size_t outcome) = 0;
+  // Returns the reading's ROI mass (DenseBeam::Update).
+  virtual double Update(std::size_t beam, std::size_t outcome) = 0;
   // Applies updates[k] = (beam, outcome) in order, prefetching a few updates ahead so that a
-  // frame's beams stream through memory instead of waiting on each one.
+  // frame's beams stream through memory instead of waiting on each one; roi_masses (if not
+  // null) gets each update's ROI mass.
   struct BeamOutcome {
     std::uint32_t beam;
     std::uint32_t outcome;
   };
-  virtual void UpdateMany(const BeamOutcome* updates, std::size_t count) = 0;
+  virtual void UpdateMany(const BeamOutcome* updates, std::size_t count, double* roi_masses) = 0;
   virtual void Weights(std::size_t beam, std::vector<double>* weights) const = 0;
   virtual void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
                           std::vector<double>* out) const = 0;

@@ -32,15 +32,17 @@ struct BeamGridOptions {
   double prior_reference_length_m = kDefaultPriorReferenceLengthM;
   BeamRepresentation representation = kDefaultRepresentation;
 
-  // Change detection (docs/mapping.md, "A world that changes"). Once a beam has taken
-  // change_run readings since it (re)started, a reading is surprising when the beam's p(B)
-  // puts less than change_min_mass on the cells its forward model can explain it from (the
-  // outcome's ROI: mu +- Delta sigma, bias included): the posterior calls it nearly impossible
-  // but for the outlier floor. change_run surprising readings in a row restart the beam at its
-  // prior before the reading is applied (0: off). Under the model's own noise a reading is
-  // surprising about as often as it falls outside Delta sigma (0.27 % at 3 sigma), so 3 in a
-  // row happen ~2e-8 times per reading; a surface moved by 2 Delta sigma trips every reading.
-  static constexpr std::uint32_t kDefaultChangeRun = 0;
+  // Change detection (docs/mapping.md, "A world that changes"). Once some reading since the beam
+  // (re)started found at least half of the beam's p(B) on the cells its forward model can
+  // explain it from (the outcome's ROI: mu +- Delta sigma, bias included), a reading is
+  // surprising when that mass is below change_min_mass: the posterior calls it nearly
+  // impossible but for the outlier floor. Every reading is applied; change_run surprising ones
+  // in a row restart the beam at its prior and apply the run again (0: off). Under the model's
+  // own noise a reading is surprising about as often as it falls outside Delta sigma (0.27 % at
+  // 3 sigma), so 3 in a row happen ~2e-8 times per reading; a surface moved by 2 Delta sigma
+  // trips every reading. The ROI mass comes out of the update's own loop: on costs nothing
+  // measurable (BENCHMARKS.md).
+  static constexpr std::uint32_t kDefaultChangeRun = 3;
   static constexpr double kDefaultChangeMinMass = 1e-3;
   std::uint32_t change_run = kDefaultChangeRun;
   double change_min_mass = kDefaultChangeMinMass;

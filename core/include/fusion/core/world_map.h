@@ -56,8 +56,10 @@ struct WorldMapOptions {
       kDefaultPoseToleranceDeg * 3.14159265358979323846 / 180.0;
   static constexpr double kDefaultClampingMin = FusionPolicy::kDefaultClampingMin;
   static constexpr double kDefaultClampingMax = FusionPolicy::kDefaultClampingMax;
+  static constexpr double kDefaultHistoryClampingMax = 0.999;
   static constexpr double kDefaultBeamPriorLengthM = 1.0;
   static constexpr double kDefaultOccupancyThreshold = 0.5;
+  static constexpr float kForgottenLogOdds = 0.05f;  // |log-odds| below: unknown again
 
   double resolution_m = kDefaultResolutionM;
   FusionRule rule = kDefaultRule;
@@ -78,6 +80,17 @@ struct WorldMapOptions {
   // stays updatable.
   double clamping_min_probability = kDefaultClampingMin;
   double clamping_max_probability = kDefaultClampingMax;
+  // The committed history is clamped tighter on the occupied side (min is shared: the render
+  // leaves out the history's saturated free space, which needs one free clamp): what a period
+  // saw occupied is overturned by the free evidence of a few later ones, wherever a moving
+  // sensor's frames or a stationary sensor's new period find it gone (docs/mapping.md, "A
+  // world that changes"). A period's own evidence is not clamped by it: a sensor standing
+  // still keeps its certainty until it commits. In (clamping_min, clamping_max].
+  double history_clamping_max_probability = kDefaultHistoryClampingMax;
+  // Evidence nobody observes again decays toward unknown with this half-life (seconds): Forget
+  // scales the committed history's log-odds by 0.5^(elapsed / half-life) and drops what comes
+  // within kForgottenLogOdds of 0. 0: never (the default).
+  double forget_half_life_s = 0.0;
   // The trees' OcTree::setOccupancyThres (what OctoMap's own readers, castRay and the .bt
   // writer, call occupied).
   double occupancy_threshold = kDefaultOccupancyThreshold;
@@ -160,6 +173,14 @@ class WorldMap {
   // names the regions. A caller that keeps periods of its own (the service's worker, with the
   // pieces above) folds and restarts those first. Returns the voxels forgotten.
   std::uint64_t ClearBox(const Eigen::AlignedBox3d& box_world);
+  // Lets elapsed_s of time pass over the committed history (options().forget_half_life_s):
+  // every value's log-odds is scaled by 0.5^(elapsed_s / half-life), values that come within
+  // kForgottenLogOdds of 0 are removed (unknown), and the map is re-fused. What sensors observe
+  // now (their live contributions) is not decayed, and what they observe again is refreshed
+  // when it is committed. Does nothing when forgetting is off or elapsed_s <= 0. Returns the
+  // history leaves removed. The caller keeps the clock (the service's worker, on its renderer
+  // thread). The next publication names every region of the history.
+  std::uint64_t Forget(double elapsed_s);
   // Publishes the map if it changed since the last publication (a new version), else returns
   // the last one again.
   Publication Publish();
@@ -211,6 +232,7 @@ class WorldMap {
 
   WorldMapOptions options_;
   FusionPolicy policy_;
+  FusionPolicy history_policy_;  // policy_ with the history's occupied clamp
   RenderOptions render_;
   std::map<std::string, std::unique_ptr<SensorState>> sensors_;
   std::unique_ptr<octomap::OcTree> committed_;

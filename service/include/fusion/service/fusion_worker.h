@@ -114,6 +114,9 @@ class FusionWorker {
   // One renderer step (sealed period first, else an open period); false if there was nothing
   // to do.
   bool RenderStep();
+  // Forgetting (map.forget_half_life_s): lets the time since the last step pass over the map's
+  // history when it is due; false if it was not.
+  bool ForgetStep(std::chrono::steady_clock::time_point now);
   void CommitSealed(Sealed sealed);
   bool RenderOpen(Lane& lane);
   void PublishLocked();
@@ -130,6 +133,7 @@ class FusionWorker {
   std::mutex map_mutex_;  // the renderer's steps, Reset; guards map_
   std::unique_ptr<WorldMap> map_;
   std::uint64_t published_version_ = 0;
+  std::chrono::steady_clock::time_point last_forget_;  // under map_mutex_
 
   std::mutex work_mutex_;  // guards sealed_ and the wake-up of the renderer
   std::condition_variable work_cv_;
