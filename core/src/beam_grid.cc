@@ -31,23 +31,35 @@ struct BeamGrid::Impl {
   std::vector<BeamStore::BeamOutcome> scratch;  // reused by Integrate / UpdateEachBeam
   // Change detection (BeamGridOptions::change_run), per beam: whether a reading has found the
   // beam's p(B) holding it (ROI mass >= kConfidentMass) since the beam (re)started, the
-  // surprising readings in a row (up to 100, in the low bits) and those readings' outcomes.
+  // surprising clouds in a row (up to 100, in the low bits) and a reading of each of them.
   static constexpr std::uint8_t kConfident = 0x80;
   static constexpr double kConfidentMass = 0.5;
   std::vector<std::uint8_t> state;
-  std::vector<std::uint32_t> held;    // change_run - 1 per beam
-  std::vector<double> masses;         // each update's ROI mass (BeamStore::UpdateMany)
-  std::vector<std::uint8_t> restarted;  // beams restarted in the batch being judged
-  std::vector<std::uint32_t> restarted_beams;
+  std::vector<std::uint32_t> held;  // change_run - 1 per beam
+  std::vector<double> masses;       // each update's ROI mass (BeamStore::UpdateMany)
+  // One cloud's readings of each beam it touched (reset after the cloud).
+  struct Tally {
+    std::uint32_t readings = 0;
+    std::uint32_t surprising = 0;
+    std::uint32_t first_surprising = 0;  // its outcome
+    bool believes = false;               // some reading found kConfidentMass
+  };
+  std::vector<Tally> tally;
+  std::vector<std::uint32_t> touched;    // beams with a tally
+  std::vector<std::uint8_t> restarting;  // beams restarted after this cloud
 
-  // Applies the updates in order. With change detection on, each reading is judged by its ROI
-  // mass under the posterior it met (the update's own by-product): a confident beam's
-  // surprising readings count in a row, and change_run of them restart the beam at its prior,
-  // which then takes the run again; any other reading ends the run. Surprising readings are
-  // applied like every other (the model's outlier floor accounts for the odd one).
+  // Applies one cloud's updates in order. With change detection on, each reading is judged by
+  // its ROI mass under the posterior it met (the update's own by-product), and each beam by
+  // its readings in the cloud: a cloud is one observation, so a beam whose footprint holds two
+  // depths (several pixels per beam) is not mistaken for a change. A confident beam is
+  // surprised by a cloud when more than half of its readings in it were surprising; change_run
+  // surprised clouds in a row restart it at its prior after the cloud, and it takes a reading
+  // of each earlier cloud of the run and every reading of this one again. Any other cloud
+  // with readings of the beam ends its run. Every reading is applied (the model's outlier
+  // floor accounts for the odd surprising one).
   void Apply(const std::vector<BeamStore::BeamOutcome>& todo, IntegrationStats* stats);
-  // One reading judged; `mass` is its ROI mass. Restarts the beam at the end of a run.
-  void Judge(const BeamStore::BeamOutcome& u, double mass, IntegrationStats* stats);
+  // The verdict on one beam's tally; true if the beam restarts.
+  bool Judge(std::uint32_t beam, const Tally& t);
 
   void CheckBeam(std::size_t beam) const {
     if (beam >= store->beam_count()) throw std::out_of_range("beam index out of range");
@@ -64,48 +76,62 @@ void BeamGrid::Impl::Apply(const std::vector<BeamStore::BeamOutcome>& todo,
   if (state.empty()) {
     state.assign(store->beam_count(), 0);
     held.assign(store->beam_count() * (limit - 1), 0);
-    restarted.assign(store->beam_count(), 0);
+    tally.assign(store->beam_count(), Tally{});
+    restarting.assign(store->beam_count(), 0);
   }
   masses.resize(todo.size());
   store->UpdateMany(todo.data(), todo.size(), masses.data());
-  // The batch was applied beam by beam in order; a beam restarted at update k lost the updates
-  // after k that UpdateMany had applied before, so those are applied again, in order.
   for (std::size_t k = 0; k < todo.size(); ++k) {
     const BeamStore::BeamOutcome& u = todo[k];
-    const double mass = restarted[u.beam] != 0 ? store->Update(u.beam, u.outcome) : masses[k];
-    Judge(u, mass, stats);
+    Tally& t = tally[u.beam];
+    if (t.readings == 0) touched.push_back(u.beam);
+    ++t.readings;
+    const double mass = masses[k];
+    t.believes |= mass >= kConfidentMass;
+    if ((state[u.beam] & kConfident) != 0 && mass >= 0.0 && mass < options.change_min_mass &&
+        t.surprising++ == 0) {
+      t.first_surprising = u.outcome;
+    }
   }
-  for (const std::uint32_t beam : restarted_beams) restarted[beam] = 0;
-  restarted_beams.clear();
+  std::size_t restarts = 0;
+  for (const std::uint32_t beam : touched) {
+    if (Judge(beam, tally[beam])) {
+      restarting[beam] = 1;
+      ++restarts;
+      store->ResetBeam(beam);  // and the run's earlier clouds again
+      bool believes = false;
+      for (std::uint32_t k = 0; k + 1 < limit; ++k) {
+        believes |= store->Update(beam, held[beam * (limit - 1) + k]) >= kConfidentMass;
+      }
+      state[beam] = believes ? kConfident : 0;
+    }
+    tally[beam] = Tally{};
+  }
+  touched.clear();
+  if (restarts == 0) return;
+  stats->changes_detected += restarts;
+  for (const BeamStore::BeamOutcome& u : todo) {  // this cloud again, in order
+    if (restarting[u.beam] == 0) continue;
+    if (store->Update(u.beam, u.outcome) >= kConfidentMass) state[u.beam] = kConfident;
+  }
+  for (const BeamStore::BeamOutcome& u : todo) restarting[u.beam] = 0;
 }
 
-void BeamGrid::Impl::Judge(const BeamStore::BeamOutcome& u, double mass, IntegrationStats* stats) {
+bool BeamGrid::Impl::Judge(std::uint32_t beam, const Tally& t) {
   const std::uint32_t limit = options.change_run;
-  std::uint8_t& s = state[u.beam];
+  std::uint8_t& s = state[beam];
   const bool confident = (s & kConfident) != 0;
-  if (!confident || !(mass >= 0.0 && mass < options.change_min_mass)) {
-    s = (confident || mass >= kConfidentMass) ? kConfident : 0;  // expected: the run ends
-    return;
+  if (!confident || 2u * t.surprising <= t.readings) {  // expected: the run ends
+    s = (confident || t.believes) ? kConfident : 0;
+    return false;
   }
   const std::uint32_t run = s & ~kConfident;
-  if (run + 1 < limit) {  // an outlier, or the start of a change
-    held[u.beam * (limit - 1) + run] = u.outcome;
+  if (run + 1 < limit) {  // outliers, or the start of a change
+    held[beam * (limit - 1) + run] = t.first_surprising;
     s = static_cast<std::uint8_t>(kConfident | (run + 1));
-    return;
+    return false;
   }
-  // The world changed along this beam: restart it and give it the run of readings.
-  store->ResetBeam(u.beam);
-  ++stats->changes_detected;
-  bool believes = false;
-  for (std::uint32_t k = 0; k + 1 < limit; ++k) {
-    believes |= store->Update(u.beam, held[u.beam * (limit - 1) + k]) >= kConfidentMass;
-  }
-  believes |= store->Update(u.beam, u.outcome) >= kConfidentMass;
-  s = believes ? kConfident : 0;
-  if (restarted[u.beam] == 0) {
-    restarted[u.beam] = 1;
-    restarted_beams.push_back(u.beam);
-  }
+  return true;  // the world changed along this beam
 }
 
 BeamGrid::BeamGrid(const SensorSpec& spec, const BeamGridOptions& options)

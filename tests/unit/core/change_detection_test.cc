@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "fusion/core/beam_grid.h"
+#include "fusion/core/beam_tessellation.h"
 #include "fusion/core/sensor.h"
 #include "fusion/sim/simulator.h"
 
@@ -142,31 +143,45 @@ TEST_F(ChangeDetectionTest, DenseAndUnrolledBeamsDecideAlike) {
   EXPECT_GE(changes, 32u) << "both changes seen";
 }
 
-// Readings of one beam in one cloud (a depth image mapped onto a coarser tessellation gives
-// several per beam) are judged in order, as if they came one cloud each: a restart in the
-// middle of a cloud keeps the readings after it.
-TEST_F(ChangeDetectionTest, ReadingsOfOneBeamInOneCloudAreJudgedInOrder) {
-  BeamGrid batched(spec_, options_), one_by_one(spec_, options_);
-  const BeamTessellation& beams = batched.tessellation();
+// A cloud is one observation of a beam, however many of its readings fall in it (a depth image
+// mapped onto a coarser tessellation gives several per beam): a beam whose footprint holds two
+// depths in every cloud never restarts; a beam whose whole footprint moves restarts after
+// change_run clouds, holding a reading of each earlier cloud of the run and all of the last.
+TEST_F(ChangeDetectionTest, ACloudIsOneObservationOfABeam) {
   const std::size_t beam = 5;
-  const Eigen::Vector3d direction = beams.Direction(beam);
-  std::size_t batched_changes = 0, single_changes = 0;
-  for (int cloud = 0; cloud < 6; ++cloud) {
-    const double r_m = cloud < 3 ? 1.3 : 1.6;  // the surface moves by 30 cm
+  const Eigen::Vector3d direction = BeamTessellation(spec_).Direction(beam);
+  // Eight readings of the beam: the first `near` at 1.3 m, the rest at 1.6 m.
+  const auto cloud = [&](int near) {
     std::vector<float> xyz;
     for (int k = 0; k < 8; ++k) {
+      const double r_m = k < near ? 1.3 : 1.6;
       const double range_m = spec_.q_mu(r_m) + spec_.q_sigma(r_m) * normal_(rng_);
       for (int a = 0; a < 3; ++a) xyz.push_back(static_cast<float>(direction[a] * range_m));
     }
-    batched_changes += batched.Integrate(xyz.data(), 8).changes_detected;
-    for (int k = 0; k < 8; ++k) {
-      single_changes += one_by_one.Integrate(xyz.data() + 3 * k, 1).changes_detected;
+    return xyz;
+  };
+  BeamGrid edge(spec_, options_);
+  for (int c = 0; c < 30; ++c) {
+    const std::vector<float> xyz = cloud(3 + c % 3);  // an edge across the footprint, every cloud
+    EXPECT_EQ(edge.Integrate(xyz.data(), 8).changes_detected, 0u) << "cloud " << c;
+  }
+  BeamGrid moving(spec_, options_);
+  BeamGridOptions plain = options_;
+  plain.change_run = 0;
+  BeamGrid expected(spec_, plain);
+  std::size_t changes = 0;
+  for (int c = 0; c < 3 + static_cast<int>(kRun); ++c) {
+    const std::vector<float> xyz = cloud(c < 3 ? 8 : 0);  // the surface moves by 30 cm
+    changes += moving.Integrate(xyz.data(), 8).changes_detected;
+    if (c >= 3 && c + 1 < 3 + static_cast<int>(kRun)) {
+      (void)expected.Integrate(xyz.data(), 1);  // the run's first surprising reading
+    } else if (c + 1 == 3 + static_cast<int>(kRun)) {
+      (void)expected.Integrate(xyz.data(), 8);  // and the last cloud whole
     }
   }
-  EXPECT_EQ(batched_changes, 1u) << "the move restarts the beam once";
-  EXPECT_EQ(single_changes, batched_changes);
-  const std::vector<double> a = batched.FirstHitProbabilities(beam);
-  const std::vector<double> b = one_by_one.FirstHitProbabilities(beam);
+  EXPECT_EQ(changes, 1u) << "one restart, after the run";
+  const std::vector<double> a = moving.FirstHitProbabilities(beam);
+  const std::vector<double> b = expected.FirstHitProbabilities(beam);
   ASSERT_EQ(a.size(), b.size());
   for (std::size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(a[i], b[i], 1e-9) << "cell " << i;
 }

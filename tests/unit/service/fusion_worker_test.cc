@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <thread>
 #include <tuple>
 #include <vector>
@@ -159,6 +160,37 @@ TEST_F(FusionWorkerTest, MovingPeriodsAreCommittedInOrderEachCloudOnce) {
   const auto published = hub_.Current();
   ASSERT_GT(expected.tree().getNumLeafNodes(), 100u);
   EXPECT_EQ(Leaves(*published->tree), Leaves(expected.tree()));
+}
+
+double SumOfAbsLogOdds(const octomap::OcTree& tree) {
+  double sum = 0.0;
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    sum += std::abs(it->getLogOdds()) * static_cast<double>(1u << (3 * (16 - it.getDepth())));
+  }
+  return sum;
+}
+
+// map.forget_half_life_s: the renderer lets time pass over the committed history on its own
+// clock, and publishes what decayed.
+TEST_F(FusionWorkerTest, TheHistoryDecaysWithTheHalfLifeWhileNobodyLooks) {
+  WorkerOptions options = Options();
+  options.wait_for_renderer = true;
+  options.map.forget_half_life_s = 1.0;  // a step a second
+  StartWorker(16, 12, options);
+  for (int k = 0; k < 6; ++k) ASSERT_TRUE(queues_.Push(Driving(*tessellation_, k), &never_));
+  const auto end = std::chrono::steady_clock::now() + 20s;
+  while (worker_->in_map() < 6 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(5ms);
+  }
+  ASSERT_EQ(worker_->in_map(), 6u);
+  const auto before = hub_.Current();
+  const double evidence_before = SumOfAbsLogOdds(*before->tree);
+  ASSERT_GT(evidence_before, 0.0);
+  std::this_thread::sleep_for(2500ms);
+  const auto after = hub_.Current();
+  EXPECT_GT(after->version, before->version) << "forgetting publishes";
+  EXPECT_LT(SumOfAbsLogOdds(*after->tree), 0.75 * evidence_before)
+      << "five of the six periods are history and decay; the open one stays";
 }
 
 TEST_F(FusionWorkerTest, ARendererBehindGetsCloudsMergedNeverDropped) {
