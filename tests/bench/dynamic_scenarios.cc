@@ -39,7 +39,6 @@ std::vector<Config> Configs(double resolution_m) {
   add("change_run 0, history clamp 0.999", 0, 0.999);
   add("change_run 3, history clamp 0.999", 3, 0.999);
   add("change_run 3, history clamp 0.97", 3, 0.97);
-  add("change_run 3, history clamp 0.9", 3, 0.9);
   return configs;
 }
 

@@ -75,6 +75,10 @@ struct Options {
   int cols = 640, rows = 480;
   std::string log_level = "warn";
   double timeout_s = 900.0;
+  // The map's pose tolerance: frames within it of a period's first pose join that period (its
+  // beam grids, change detection); 0: the service's default (1 cm, 1 deg).
+  double pose_tolerance_m = 0.0;
+  double pose_tolerance_deg = 0.0;
 };
 
 // The repository root from this file's path (tests/bench/service/tum_map_bench_common.h).
@@ -88,12 +92,15 @@ inline std::string DefaultDataDir() {
 
 constexpr const char* kUsage =
     "usage: tum_map_bench [--data DIR] [--resolution M] [--beams COLSxROWS] [--log-level LEVEL]\n"
-    "                     [--timeout S]\n"
+    "                     [--timeout S] [--pose-tolerance M,DEG]\n"
     "  --data        the TUM folder (default ../shared/data/tum_fr2_pioneer_slam2)\n"
     "  --resolution  map voxel edge, metres (default 0.02)\n"
     "  --beams       the Kinect's beam grid (default 640x480: one beam per pixel)\n"
     "  --log-level   fusiond's (default warn)\n"
-    "  --timeout     seconds to wait for the service's map (default 900)\n";
+    "  --timeout     seconds to wait for the service's map (default 900)\n"
+    "  --pose-tolerance  frames within M metres and DEG degrees of a period's first pose join\n"
+    "                it (default: the service's 0.01,1); wider ones let change detection judge\n"
+    "                later frames against earlier ones\n";
 
 inline bool ParseArgs(int argc, char** argv, Options* options) {
   options->data_dir = DefaultDataDir();
@@ -118,6 +125,13 @@ inline bool ParseArgs(int argc, char** argv, Options* options) {
       options->log_level = value;
     } else if (flag == "--timeout") {
       options->timeout_s = std::atof(value.c_str());
+    } else if (flag == "--pose-tolerance") {
+      if (std::sscanf(value.c_str(), "%lf,%lf", &options->pose_tolerance_m,
+                      &options->pose_tolerance_deg) != 2 ||
+          !(options->pose_tolerance_m > 0.0) || !(options->pose_tolerance_deg > 0.0)) {
+        std::fprintf(stderr, "--pose-tolerance wants M,DEG, both > 0, e.g. 0.5,30\n");
+        return false;
+      }
     } else {
       std::fprintf(stderr, "unknown flag %s\n", flag.c_str());
       return false;
@@ -161,7 +175,12 @@ inline std::string ConfigText(const Options& options) {
          << "  q_sigma { a2: " << s2 << " a1: " << s1 << " a0: " << s0 << " }\n"
          << "  queue_depth: 20 }\n"
          << "map { resolution_m: " << resolution_m
-         << " render_interval_ms: 100 beam_cell_size_m: " << kBeamCellSizeM << " }\n"
+         << " render_interval_ms: 100 beam_cell_size_m: " << kBeamCellSizeM;
+  if (options.pose_tolerance_m > 0.0) {
+    config << " pose_tolerance_m: " << options.pose_tolerance_m
+           << " pose_tolerance_deg: " << options.pose_tolerance_deg;
+  }
+  config << " }\n"
          << "ingest { reliability: \"reliable\" }\n";
   return config.str();
 }

@@ -162,13 +162,15 @@ inline void PrintServiceCounters(const v1::SensorInfo& sensor, const v1::Stats& 
   std::printf(
       "service counters (ListSensors '%s', %u x %u beams, sensor memory %.1f MB): received %llu, "
       "rejected %llu, dropped %llu, integrated %llu, merged %s, points_updated %llu, "
-      "points_beyond_range %llu, points_missing %llu, points_rejected %llu\n",
+      "points_beyond_range %llu, points_missing %llu, points_rejected %llu, changes_detected "
+      "%llu\n",
       sensor.id().c_str(), sensor.cols(), sensor.rows(), Megabytes(sensor.memory_bytes()),
       (unsigned long long)c.received(), (unsigned long long)c.rejected(),
       (unsigned long long)c.dropped(), (unsigned long long)c.integrated(),
       merged ? std::to_string(*merged).c_str() : "(no such counter)",
       (unsigned long long)c.points_updated(), (unsigned long long)c.points_beyond_range(),
-      (unsigned long long)c.points_missing(), (unsigned long long)c.points_rejected());
+      (unsigned long long)c.points_missing(), (unsigned long long)c.points_rejected(),
+      (unsigned long long)c.changes_detected());
   for (const auto& [reason, n] : c.rejected_by_reason())
     std::printf("  rejected because %s: %llu\n", reason.c_str(), (unsigned long long)n);
   std::printf(
