@@ -277,14 +277,14 @@ std::uint64_t WorldMap::Forget(double elapsed_s) {
     it->setLogOdds(it->getLogOdds() * factor);
   }
   RenderedGrid forgotten(options_.resolution_m);
-  ForEachInRegion(*committed_, {0, 0},
-                  [&forgotten](const octomap::OcTreeKey& key, unsigned depth,
-                               const octomap::OcTreeNode* node) {
-                    if (node != nullptr && std::abs(node->getLogOdds()) < WorldMapOptions::kForgottenLogOdds) {
-                      forgotten.Append({MortonAtDepth(MortonOf(key), depth), 0.0f,
-                                        static_cast<std::uint8_t>(depth)});
-                    }
-                  });
+  ForEachInRegion(
+      *committed_, {0, 0},
+      [&forgotten](const octomap::OcTreeKey& key, unsigned depth, const octomap::OcTreeNode* node) {
+        if (node != nullptr && std::abs(node->getLogOdds()) < WorldMapOptions::kForgottenLogOdds) {
+          forgotten.Append(
+              {MortonAtDepth(MortonOf(key), depth), 0.0f, static_cast<std::uint8_t>(depth)});
+        }
+      });
   if (!forgotten.empty()) FuseRegions(*committed_, history_policy_, {}, {&forgotten});
   const RenderedGrid all = Everything(options_.resolution_m);
   const std::size_t before = pending_.size();

@@ -305,10 +305,9 @@ bool FusionWorker::ForgetStep(std::chrono::steady_clock::time_point now) {
   if (!(half_life_s > 0.0)) return false;
   // A twentieth of the half-life (each step re-fuses the whole map), at most once a second
   // (the renderer wakes that often) and at least once a minute.
-  const auto interval = std::chrono::duration<double>(std::clamp(half_life_s / 20.0, 1.0, 60.0));
-  if (now < last_forget_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(interval)) {
-    return false;
-  }
+  const auto interval = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(std::clamp(half_life_s / 20.0, 1.0, 60.0)));
+  if (now < last_forget_ + interval) return false;
   const double elapsed_s = std::chrono::duration<double>(now - last_forget_).count();
   last_forget_ = now;
   const std::uint64_t forgotten = map_->Forget(elapsed_s);

@@ -84,12 +84,14 @@ int main(int argc, char** argv) {
   fusion::SensorSpec spec = *fusion::SensorPreset("sr3000");
   if (cols > 0) spec = fusion::sim::WithTessellation(spec, cols, rows);
   const double rate_hz = 30.0;
-  std::printf("SR-3000 (%dx%d beams) at %.0f Hz, resolution %.3f m; trail: voxels the object held "
-              "that the map had called occupied, still occupied L frames after it left them\n\n",
-              spec.cols, spec.rows, rate_hz, resolution_m);
-  std::printf("| scenario | configuration | trail voxels | clear [frames, <= 5 %%] | after 3 "
-              "frames | after 1 s | false alarms / beam / frame | static recall | static Brier "
-              "| time [s] |\n|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf(
+      "SR-3000 (%dx%d beams) at %.0f Hz, resolution %.3f m; trail: voxels the object held "
+      "that the map had called occupied, still occupied L frames after it left them\n\n",
+      spec.cols, spec.rows, rate_hz, resolution_m);
+  std::printf(
+      "| scenario | configuration | trail voxels | clear [frames, <= 5 %%] | after 3 "
+      "frames | after 1 s | false alarms / beam / frame | static recall | static Brier "
+      "| time [s] |\n|---|---|---|---|---|---|---|---|---|---|\n");
   const std::vector<DynamicScenario> scenarios = {
       fusion::sim::CrateRemovedScenario(spec, false), fusion::sim::CrateRemovedScenario(spec, true),
       fusion::sim::WalkerScenario(spec, false), fusion::sim::WalkerScenario(spec, true)};
@@ -107,14 +109,14 @@ int main(int argc, char** argv) {
               ? static_cast<double>(baseline.changes_detected) / baseline.beam_readings
               : 0.0;
       const int clear = run.ClearFrames(0.05);
-      std::printf("| %s | %s | %zu | %s | %s | %s | %.2g | %.3f (%.3f without it) | %.4f (%.4f) "
-                  "| %.1f |\n",
-                  scenario.name.c_str(), config.name.c_str(), run.trail_voxels,
-                  clear < 0 ? "never" : std::to_string(clear).c_str(),
-                  Percent(run.TrailAt(3)).c_str(),
-                  Percent(run.TrailAt(static_cast<int>(rate_hz))).c_str(), false_alarms,
-                  run.static_accuracy.recall, baseline.static_accuracy.recall,
-                  run.static_accuracy.brier, baseline.static_accuracy.brier, seconds);
+      std::printf(
+          "| %s | %s | %zu | %s | %s | %s | %.2g | %.3f (%.3f without it) | %.4f (%.4f) "
+          "| %.1f |\n",
+          scenario.name.c_str(), config.name.c_str(), run.trail_voxels,
+          clear < 0 ? "never" : std::to_string(clear).c_str(), Percent(run.TrailAt(3)).c_str(),
+          Percent(run.TrailAt(static_cast<int>(rate_hz))).c_str(), false_alarms,
+          run.static_accuracy.recall, baseline.static_accuracy.recall, run.static_accuracy.brier,
+          baseline.static_accuracy.brier, seconds);
       std::fflush(stdout);
     }
   }

@@ -18,15 +18,17 @@ constexpr const char* kPaperScene =
     "rect board 1.75 0 0.2   0 1 0   0 0 1   1.2 1.0\n"
     "rect floor 2.0 0 -0.41  1 0 0   0 1 0   4 4 untextured\n";
 
-Scene StaticPart(const Scene& scene) {
-  Scene still;
+// The objects of `scene` that `keep` accepts (rectangles and boxes alike).
+template <class Keep>
+Scene Filtered(const Scene& scene, Keep keep) {
+  Scene kept;
   for (const Rectangle& r : scene.rectangles()) {
-    if (r.motion.IsStatic()) still.AddRectangle(r);
+    if (keep(r)) kept.AddRectangle(r);
   }
   for (const Box& b : scene.boxes()) {
-    if (b.motion.IsStatic()) still.AddBox(b);
+    if (keep(b)) kept.AddBox(b);
   }
-  return still;
+  return kept;
 }
 
 // One voxel the object held: the last frame it did, and frame by frame whether the map called
@@ -54,9 +56,9 @@ bool Visible(const Scene& now, const BeamTessellation& beams, const SensorSpec& 
 
 // Marks the voxels whose centres lie inside the box (at least a voxel from every static
 // surface) as held at `frame`.
-void MarkHeld(const Box& box, const Scene& still, const octomap::OcTree& tree, int frame,
-              int frames, std::unordered_map<octomap::OcTreeKey, HeldVoxel,
-                                             octomap::OcTreeKey::KeyHash>* held) {
+void MarkHeld(
+    const Box& box, const Scene& still, const octomap::OcTree& tree, int frame, int frames,
+    std::unordered_map<octomap::OcTreeKey, HeldVoxel, octomap::OcTreeKey::KeyHash>* held) {
   const double res = tree.getResolution();
   const Eigen::Matrix3d R = box.T_world_box.rotation();
   const Eigen::Vector3d reach = R.cwiseAbs() * box.half_extents_m;
@@ -114,14 +116,9 @@ DynamicResult RunDynamicScenario(const DynamicScenario& scenario, const WorldMap
   std::optional<Scene> scene = ParseScene(scenario.scene, &error);
   if (!scene) throw std::invalid_argument("scenario " + scenario.name + ": " + error);
   if (scenario.without_object) {
-    Scene rest;
-    for (const Rectangle& r : scene->rectangles()) rest.AddRectangle(r);
-    for (const Box& b : scene->boxes()) {
-      if (b.name != scenario.object) rest.AddBox(b);
-    }
-    scene = std::move(rest);
+    scene = Filtered(*scene, [&](const auto& o) { return o.name != scenario.object; });
   }
-  const Scene still = StaticPart(*scene);
+  const Scene still = Filtered(*scene, [](const auto& o) { return o.motion.IsStatic(); });
   if (scenario.sensor_path.empty()) throw std::invalid_argument("scenario has no sensor path");
   Motion sensor;
   sensor.path = scenario.sensor_path;
@@ -143,8 +140,8 @@ DynamicResult RunDynamicScenario(const DynamicScenario& scenario, const WorldMap
     pose = ForwardLookingPose(sensor.CentreAt(t_s, Eigen::Vector3d::Zero()));
     const OrganizedCloud cloud = simulator.Capture(pose, t_s);
     IntegrationStats stats;
-    if (map.Integrate("sensor", pose, cloud.xyz.data(), cloud.size(), cloud.beyond_range,
-                      &stats) != MapStatus::kOk ||
+    if (map.Integrate("sensor", pose, cloud.xyz.data(), cloud.size(), cloud.beyond_range, &stats) !=
+            MapStatus::kOk ||
         map.Render("sensor") != MapStatus::kOk) {
       throw std::runtime_error("scenario " + scenario.name + ": integration failed");
     }
@@ -218,7 +215,8 @@ DynamicScenario WalkerScenario(const SensorSpec& spec, bool moving) {
   s.spec = spec;
   s.duration_s = 3.2;
   if (moving) {
-    s.sensor_path = {{0.0, Eigen::Vector3d(0.0, 0.3, 0.0)}, {3.2, Eigen::Vector3d(0.0, -0.66, 0.0)}};
+    s.sensor_path = {{0.0, Eigen::Vector3d(0.0, 0.3, 0.0)},
+                     {3.2, Eigen::Vector3d(0.0, -0.66, 0.0)}};
   } else {
     s.sensor_path = {{0.0, Eigen::Vector3d::Zero()}};
   }

@@ -95,13 +95,15 @@ void PrintCoreCounters(const fusion::WorldMap& map, const CoreTotals& totals) {
       s.updated, s.beyond_range, s.missing, s.rejected_nonfinite, s.rejected_outside_fov,
       totals.failures, totals.integrate_s, totals.render_s);
   if (const auto c = map.Counters(kSensorId); c && map.beam_grid(kSensorId) != nullptr) {
-    const double beam_clouds = static_cast<double>(map.beam_grid(kSensorId)->beam_count()) *
-                               static_cast<double>(std::max<std::uint64_t>(1, c->frames_integrated));
-    std::printf("  change detection: %zu beams restarted: %.2g per reading, %.2g per beam and cloud\n",
-                s.changes_detected,
-                static_cast<double>(s.changes_detected) /
-                    static_cast<double>(std::max<std::size_t>(1, s.updated + s.beyond_range)),
-                static_cast<double>(s.changes_detected) / beam_clouds);
+    const double beam_clouds =
+        static_cast<double>(map.beam_grid(kSensorId)->beam_count()) *
+        static_cast<double>(std::max<std::uint64_t>(1, c->frames_integrated));
+    std::printf(
+        "  change detection: %zu beams restarted: %.2g per reading, %.2g per beam and cloud\n",
+        s.changes_detected,
+        static_cast<double>(s.changes_detected) /
+            static_cast<double>(std::max<std::size_t>(1, s.updated + s.beyond_range)),
+        static_cast<double>(s.changes_detected) / beam_clouds);
   }
   if (const auto c = map.Counters(kSensorId)) {
     std::printf(

@@ -116,8 +116,8 @@ TEST_F(DynamicScenarioTest, ACrateTakenAwayIsClearWithinThreeFramesStillOrDrivin
   }
   // Without change detection the still sensor's posterior keeps the crate.
   options_.beam_grid.change_run = 0;
-  const sim::DynamicResult off = sim::RunDynamicScenario(sim::CrateRemovedScenario(spec_, false),
-                                                         options_);
+  const sim::DynamicResult off =
+      sim::RunDynamicScenario(sim::CrateRemovedScenario(spec_, false), options_);
   EXPECT_EQ(off.ClearFrames(0.05), -1);
   EXPECT_GT(off.TrailAt(30), 0.5);
 }

@@ -64,14 +64,13 @@ class Follower {
     const std::vector<MapRegion> all{{0, 0}};
     RenderedGrid values(tree_.getResolution()), removed(tree_.getResolution());
     for (const MapRegion& region : p.changes.reset ? all : p.changes.regions) {
-      ForEachInRegion(*p.tree, region,
-                      [&](const octomap::OcTreeKey& key, unsigned depth,
-                          const octomap::OcTreeNode* node) {
-                        const MapNode n{MortonAtDepth(MortonOf(key), depth),
-                                        node ? node->getLogOdds() : 0.0f,
-                                        static_cast<std::uint8_t>(depth)};
-                        (node ? values : removed).Append(n);
-                      });
+      ForEachInRegion(
+          *p.tree, region,
+          [&](const octomap::OcTreeKey& key, unsigned depth, const octomap::OcTreeNode* node) {
+            const MapNode n{MortonAtDepth(MortonOf(key), depth), node ? node->getLogOdds() : 0.0f,
+                            static_cast<std::uint8_t>(depth)};
+            (node ? values : removed).Append(n);
+          });
     }
     // One value per piece (a copy): the policy's clamping is the map's own.
     FuseRegions(tree_, FusionPolicy{}, {{nullptr, &values}}, {&values, &removed});
