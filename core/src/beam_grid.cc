@@ -366,7 +366,11 @@ bool BeamGrid::Touched(std::size_t beam) const {
   return impl_->store->Touched(beam);
 }
 
-void BeamGrid::Reset() { impl_->store->Reset(); }
+void BeamGrid::Reset() {
+  impl_->store->Reset();
+  // Nothing to contradict: a restarted grid (a recycled period's) holds no belief yet.
+  std::fill(impl_->state.begin(), impl_->state.end(), std::uint8_t{0});
+}
 
 std::size_t BeamGrid::MemoryBytes() const {
   return sizeof(*this) + sizeof(Impl) + impl_->store->MemoryBytes() + impl_->context->MemoryBytes();

@@ -186,6 +186,17 @@ TEST_F(ChangeDetectionTest, ACloudIsOneObservationOfABeam) {
   for (std::size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(a[i], b[i], 1e-9) << "cell " << i;
 }
 
+// A grid reset for a new period (SensorPeriods recycles them) believes nothing any more: the
+// new period's readings, wherever they lie, contradict no earlier one.
+TEST_F(ChangeDetectionTest, AResetGridHasNothingToContradict) {
+  BeamGrid grid(spec_, options_);
+  for (int k = 0; k < 30; ++k) (void)grid.UpdateEachBeam(Frame(1.3));
+  grid.Reset();
+  for (std::uint32_t k = 0; k < 2 * kRun; ++k) {
+    EXPECT_EQ(grid.UpdateEachBeam(Frame(2.5)).changes_detected, 0u) << "frame " << k;
+  }
+}
+
 TEST_F(ChangeDetectionTest, OnByDefaultOffWithARunOfZeroAndOptionsChecked) {
   EXPECT_EQ(BeamGridOptions{}.change_run, kRun);
   BeamGridOptions off;
