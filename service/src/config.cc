@@ -200,7 +200,7 @@ fusion::v1::ServiceConfig DefaultConfig() {
   map->set_change_detection_run(BeamGridOptions::kDefaultChangeRun);
   map->set_change_detection_min_mass(BeamGridOptions::kDefaultChangeMinMass);
   map->set_history_clamping_max(WorldMapOptions::kDefaultHistoryClampingMax);
-  map->set_forget_half_life_s(0.0);
+  map->set_forget_half_life_s(WorldMapOptions::kDefaultForgetHalfLifeS);
   auto* ingest = config.mutable_ingest();
   ingest->set_reliability("best_effort");
   ingest->set_max_points(4'000'000);

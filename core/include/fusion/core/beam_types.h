@@ -36,12 +36,14 @@ struct BeamGridOptions {
   // (re)started found at least half of the beam's p(B) on the cells its forward model can
   // explain it from (the outcome's ROI: mu +- Delta sigma, bias included), a reading is
   // surprising when that mass is below change_min_mass: the posterior calls it nearly
-  // impossible but for the outlier floor. Every reading is applied; change_run surprising ones
-  // in a row restart the beam at its prior and apply the run again (0: off). Under the model's
-  // own noise a reading is surprising about as often as it falls outside Delta sigma (0.27 % at
-  // 3 sigma), so 3 in a row happen ~2e-8 times per reading; a surface moved by 2 Delta sigma
-  // trips every reading. The ROI mass comes out of the update's own loop: on costs nothing
-  // measurable (BENCHMARKS.md).
+  // impossible but for the outlier floor. A cloud is one observation of a beam: it surprises the
+  // beam when more than half of the beam's readings in it are surprising. Every reading is
+  // applied; change_run surprising clouds in a row restart the beam at its prior after the cloud
+  // and apply a reading of each earlier cloud of the run and all of the last again (0: off).
+  // Under the model's own noise a reading is surprising about as often as it falls outside
+  // Delta sigma (0.27 % at 3 sigma), so 3 in a row happen ~2e-8 times per beam and cloud; a
+  // surface moved by 2 Delta sigma trips every cloud. The ROI mass comes out of the update's
+  // own loop: on costs ~4 % of the integrator's instructions (BENCHMARKS.md).
   static constexpr std::uint32_t kDefaultChangeRun = 3;
   static constexpr double kDefaultChangeMinMass = 1e-3;
   std::uint32_t change_run = kDefaultChangeRun;

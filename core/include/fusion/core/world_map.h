@@ -59,7 +59,8 @@ struct WorldMapOptions {
   static constexpr double kDefaultHistoryClampingMax = 0.999;
   static constexpr double kDefaultBeamPriorLengthM = 1.0;
   static constexpr double kDefaultOccupancyThreshold = 0.5;
-  static constexpr float kForgottenLogOdds = 0.05f;  // |log-odds| below: unknown again
+  static constexpr double kDefaultForgetHalfLifeS = 0.0;  // never
+  static constexpr float kForgottenLogOdds = 0.05f;       // |log-odds| below: unknown again
 
   double resolution_m = kDefaultResolutionM;
   FusionRule rule = kDefaultRule;
@@ -90,7 +91,7 @@ struct WorldMapOptions {
   // Evidence nobody observes again decays toward unknown with this half-life (seconds): Forget
   // scales the committed history's log-odds by 0.5^(elapsed / half-life) and drops what comes
   // within kForgottenLogOdds of 0. 0: never (the default).
-  double forget_half_life_s = 0.0;
+  double forget_half_life_s = kDefaultForgetHalfLifeS;
   // The trees' OcTree::setOccupancyThres (what OctoMap's own readers, castRay and the .bt
   // writer, call occupied).
   double occupancy_threshold = kDefaultOccupancyThreshold;
