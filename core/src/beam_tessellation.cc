@@ -2,26 +2,57 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <utility>
 
 namespace fusion {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+}  // namespace
 
 BeamTessellation::BeamTessellation(const SensorSpec& spec)
-    : cols_(spec.cols), rows_(spec.rows), fov_h_rad_(spec.fov_h_rad), fov_v_rad_(spec.fov_v_rad) {
+    : cols_(spec.cols),
+      rows_(spec.rows),
+      fov_h_rad_(spec.fov_h_rad),
+      fov_v_rad_(spec.fov_v_rad),
+      azimuth_min_rad_(spec.azimuth_centre_rad - 0.5 * spec.fov_h_rad),
+      elevation_max_rad_(spec.elevation_centre_rad + 0.5 * spec.fov_v_rad),
+      pinhole_(spec.pinhole) {
   if (cols_ < 1 || rows_ < 1 || !(fov_h_rad_ > 0.0) || !(fov_v_rad_ > 0.0) ||
-      !std::isfinite(fov_h_rad_) || !std::isfinite(fov_v_rad_)) {
+      !std::isfinite(fov_h_rad_) || !std::isfinite(fov_v_rad_) ||
+      !std::isfinite(azimuth_min_rad_) || !std::isfinite(elevation_max_rad_)) {
     throw std::invalid_argument("tessellation needs cols, rows >= 1 and a positive FOV");
   }
-  constexpr double kPi = 3.14159265358979323846;
-  if (fov_h_rad_ < kPi && fov_v_rad_ < kPi) {
-    std::vector<double> cols, rows;
+  std::vector<double> cols, rows;
+  if (pinhole_) {
+    const PinholeIntrinsics& k = *pinhole_;
+    if (!(k.fx_px > 0.0) || !(k.fy_px > 0.0) || k.stride < 1 ||
+        cols_ != (k.width_px + k.stride - 1) / k.stride ||
+        rows_ != (k.height_px + k.stride - 1) / k.stride) {
+      throw std::invalid_argument("pinhole tessellation needs fx, fy > 0 and its image's beams");
+    }
+    // Column edges on the image plane, left to right; row edges bottom (the last row) to top.
+    for (int c = 0; c <= cols_; ++c) {
+      const double u = std::min(c * k.stride, k.width_px) - 0.5;
+      cols.push_back((u - k.cx_px) / k.fx_px);
+    }
+    for (int r = rows_; r >= 0; --r) {
+      const double v = std::min(r * k.stride, k.height_px) - 0.5;
+      rows.push_back(-(v - k.cy_px) / k.fy_px);
+    }
+  } else if (azimuth_min_rad_ > -0.5 * kPi && azimuth_min_rad_ + fov_h_rad_ < 0.5 * kPi &&
+             elevation_max_rad_ < 0.5 * kPi && elevation_max_rad_ - fov_v_rad_ > -0.5 * kPi) {
     for (int k = 0; k <= cols_; ++k) {
-      cols.push_back(std::tan(-0.5 * fov_h_rad_ + k * beam_width_h_rad()));
+      cols.push_back(std::tan(azimuth_min_rad_ + k * beam_width_h_rad()));
     }
     for (int k = rows_; k >= 0; --k) {
-      rows.push_back(std::tan(0.5 * fov_v_rad_ - k * beam_width_v_rad()));
+      rows.push_back(std::tan(elevation_max_rad_ - k * beam_width_v_rad()));
     }
+  }
+  if (!cols.empty()) {
     tan_col_edges_ = Edges(std::move(cols));
     tan_row_edges_ = Edges(std::move(rows));
   }
@@ -72,8 +103,13 @@ std::size_t BeamTessellation::beam_count() const {
 }
 int BeamTessellation::cols() const { return cols_; }
 int BeamTessellation::rows() const { return rows_; }
-double BeamTessellation::beam_width_h_rad() const { return fov_h_rad_ / cols_; }
-double BeamTessellation::beam_width_v_rad() const { return fov_v_rad_ / rows_; }
+
+double BeamTessellation::beam_width_h_rad() const {
+  return pinhole_ ? pinhole_->stride / pinhole_->fx_px : fov_h_rad_ / cols_;
+}
+double BeamTessellation::beam_width_v_rad() const {
+  return pinhole_ ? pinhole_->stride / pinhole_->fy_px : fov_v_rad_ / rows_;
+}
 
 std::optional<std::size_t> BeamTessellation::BeamOf(const Eigen::Vector3d& p_sensor) const {
   if (tan_col_edges_.empty()) return BeamOfByAngles(p_sensor);
@@ -81,11 +117,11 @@ std::optional<std::size_t> BeamTessellation::BeamOf(const Eigen::Vector3d& p_sen
   const double y = p_sensor.y();
   const double z = p_sensor.z();
   if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) return std::nullopt;
-  // Both half-FOVs are below 90 degrees: a direction with z <= 0 is outside (and so is the
+  // Every azimuth is within +-90 degrees: a direction with z <= 0 is outside (and so is the
   // zero vector). Within, the tangents grow with the angles.
   if (!(z > 0.0)) return std::nullopt;
   const double tan_azimuth = x / z;
-  const double tan_elevation = -y / std::sqrt(x * x + z * z);
+  const double tan_elevation = -y / (pinhole_ ? z : std::sqrt(x * x + z * z));
   if (!tan_col_edges_.Contains(tan_azimuth) || !tan_row_edges_.Contains(tan_elevation)) {
     return std::nullopt;
   }
@@ -113,23 +149,90 @@ std::optional<std::size_t> BeamTessellation::BeamOfByAngles(const Eigen::Vector3
   const double z = p_sensor.z();
   if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) return std::nullopt;
   if (x == 0.0 && y == 0.0 && z == 0.0) return std::nullopt;
-  const double azimuth = std::atan2(x, z);
-  const double elevation = std::atan2(-y, std::hypot(x, z));
-  const double u = (azimuth + 0.5 * fov_h_rad_) / fov_h_rad_;    // 0 at the left edge
-  const double v = (0.5 * fov_v_rad_ - elevation) / fov_v_rad_;  // 0 at the top edge
+  double u = 0.0, v = 0.0;  // 0 at the left / top edge, 1 at the right / bottom one
+  if (pinhole_) {
+    const PinholeIntrinsics& k = *pinhole_;
+    if (!(z > 0.0)) return std::nullopt;
+    u = (k.fx_px * x / z + k.cx_px + 0.5) / k.width_px;
+    v = (k.fy_px * y / z + k.cy_px + 0.5) / k.height_px;
+  } else {
+    const double azimuth = std::atan2(x, z);
+    const double elevation = std::atan2(-y, std::hypot(x, z));
+    u = (azimuth - azimuth_min_rad_) / fov_h_rad_;
+    v = (elevation_max_rad_ - elevation) / fov_v_rad_;
+  }
   if (!(u >= 0.0 && u <= 1.0 && v >= 0.0 && v <= 1.0)) return std::nullopt;
-  const int col = std::min(cols_ - 1, static_cast<int>(u * cols_));
-  const int row = std::min(rows_ - 1, static_cast<int>(v * rows_));
+  int col = 0, row = 0;
+  if (pinhole_) {
+    col = static_cast<int>(u * pinhole_->width_px) / pinhole_->stride;
+    row = static_cast<int>(v * pinhole_->height_px) / pinhole_->stride;
+  } else {
+    col = static_cast<int>(u * cols_);
+    row = static_cast<int>(v * rows_);
+  }
+  col = std::min(cols_ - 1, col);
+  row = std::min(rows_ - 1, row);
   return static_cast<std::size_t>(row) * static_cast<std::size_t>(cols_) +
          static_cast<std::size_t>(col);
 }
 
+BeamTessellation::PixelSpan BeamTessellation::SpanOf(int index, int pixels) const {
+  const int s = pinhole_->stride;
+  const int first = index * s;
+  return {first - 0.5, static_cast<double>(std::min(first + s, pixels) - first)};
+}
+
+double BeamTessellation::ColumnCentreTangent(int col) const {
+  if (!pinhole_) return std::tan(azimuth_min_rad_ + (col + 0.5) * beam_width_h_rad());
+  const PixelSpan span = SpanOf(col, pinhole_->width_px);
+  return (span.lo + 0.5 * span.width - pinhole_->cx_px) / pinhole_->fx_px;
+}
+
+double BeamTessellation::RowCentreTangent(int row) const {
+  if (!pinhole_) return std::tan(elevation_max_rad_ - (row + 0.5) * beam_width_v_rad());
+  const PixelSpan span = SpanOf(row, pinhole_->height_px);
+  return -(span.lo + 0.5 * span.width - pinhole_->cy_px) / pinhole_->fy_px;
+}
+
+BeamTessellation::TangentBounds BeamTessellation::InsetTangents(double beams) const {
+  if (pinhole_) {
+    // On the image plane a beam is stride pixels wide (the last one maybe fewer: at 0.5 the
+    // bounds are still its centre line, as the render's outermost rays run there).
+    const PinholeIntrinsics& k = *pinhole_;
+    const PixelSpan right = SpanOf(cols_ - 1, k.width_px);
+    const PixelSpan bottom = SpanOf(rows_ - 1, k.height_px);
+    const double w_left = std::min<double>(k.stride, k.width_px), w_right = right.width;
+    const double h_top = std::min<double>(k.stride, k.height_px), h_bottom = bottom.width;
+    return {tan_col_edges_.lo() + beams * w_left / k.fx_px,
+            tan_col_edges_.hi() - beams * w_right / k.fx_px,
+            tan_row_edges_.lo() + beams * h_bottom / k.fy_px,
+            tan_row_edges_.hi() - beams * h_top / k.fy_px};
+  }
+  const double w = beams * beam_width_h_rad();
+  const double h = beams * beam_width_v_rad();
+  return {std::tan(std::atan(tan_col_edges_.lo()) + w), std::tan(std::atan(tan_col_edges_.hi()) - w),
+          std::tan(std::atan(tan_row_edges_.lo()) + h),
+          std::tan(std::atan(tan_row_edges_.hi()) - h)};
+}
+
 Eigen::Vector3d BeamTessellation::Direction(std::size_t beam) const {
+  return SubDirection(beam, 0.0, 0.0);
+}
+
+Eigen::Vector3d BeamTessellation::SubDirection(std::size_t beam, double right, double up) const {
   if (beam >= beam_count()) throw std::out_of_range("beam index out of range");
   const int col = static_cast<int>(beam % static_cast<std::size_t>(cols_));
   const int row = static_cast<int>(beam / static_cast<std::size_t>(cols_));
-  const double azimuth = -0.5 * fov_h_rad_ + (col + 0.5) * beam_width_h_rad();
-  const double elevation = 0.5 * fov_v_rad_ - (row + 0.5) * beam_width_v_rad();
+  if (pinhole_) {
+    const PinholeIntrinsics& k = *pinhole_;
+    const PixelSpan su = SpanOf(col, k.width_px);
+    const PixelSpan sv = SpanOf(row, k.height_px);
+    const double u = su.lo + (0.5 + right) * su.width;
+    const double v = sv.lo + (0.5 - up) * sv.width;
+    return Eigen::Vector3d((u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, 1.0).normalized();
+  }
+  const double azimuth = azimuth_min_rad_ + (col + 0.5 + right) * beam_width_h_rad();
+  const double elevation = elevation_max_rad_ - (row + 0.5 - up) * beam_width_v_rad();
   return {std::cos(elevation) * std::sin(azimuth), -std::sin(elevation),
           std::cos(elevation) * std::cos(azimuth)};
 }

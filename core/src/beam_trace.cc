@@ -301,8 +301,6 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only, std::vec
   std::size_t keep = kept_from;
   while (keep < out->size() && (*out)[keep].t_out_m <= t_sub) ++keep;
   out->resize(keep);
-  const double az = std::atan2(dir_sensor.x(), dir_sensor.z());
-  const double el = std::atan2(-dir_sensor.y(), std::hypot(dir_sensor.x(), dir_sensor.z()));
   const float weight = 1.0f / static_cast<float>(k_u * k_v);
   // Unshifted sub-rays from t_sub share their information end.
   const double unshifted_info_end = t_sub == t_start_ && !std::isnan(profile.info_end_m)
@@ -310,13 +308,10 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only, std::vec
                                         : InformationEnd(beam, t_sub);
   for (int i = 0; i < k_u; ++i) {
     const double fu = SubOffset(i, k_u);
-    const double sub_az = az + fu * tess.beam_width_h_rad();
     for (int j = 0; j < k_v; ++j) {
       const double fv = SubOffset(j, k_v);
-      const double sub_el = el + fv * tess.beam_width_v_rad();
       const double shift = ShiftAt(fu, left, right) + ShiftAt(fv, down, up);
-      const Eigen::Vector3d d(std::cos(sub_el) * std::sin(sub_az), -std::sin(sub_el),
-                              std::cos(sub_el) * std::cos(sub_az));
+      const Eigen::Vector3d d = tess.SubDirection(beam, fu, fv);
       Trace(beam, R_ * d, t_sub, first(t_sub, shift), shift, weight, out,
             shift == 0.0 ? unshifted_info_end : std::numeric_limits<double>::quiet_NaN());
       ++trace.rays;

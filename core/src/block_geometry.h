@@ -47,9 +47,11 @@ struct BlockBox {
 
 // The 27 corners of the eight children of the block whose corner nearest -infinity is lo (world
 // frame), each child child_size wide, in the frame of a sensor at `origin` (world frame):
-// per corner {azimuth tangent, elevation tangent's signed square, z, -z}.
+// per corner {azimuth tangent, elevation tangent's signed square, z, -z}. The elevation tangent
+// is -y / hypot(x, z), or -y / z where `over_z` (a pinhole grid's row coordinate).
 inline void CornerAngles(const Eigen::Matrix3d& R_sensor_world, const Eigen::Vector3d& origin,
-                         const Eigen::Vector3d& lo, double child_size, F4 point[27]) {
+                         const Eigen::Vector3d& lo, double child_size, bool over_z,
+                         F4 point[27]) {
   // Corners of the eight children: a 3 x 3 x 3 lattice, its angles in the sensor frame, in
   // floats so that the loop below runs on vectors (the margins cover the rounding).
   const Eigen::Vector3d base = R_sensor_world * (lo - origin);
@@ -77,7 +79,7 @@ inline void CornerAngles(const Eigen::Matrix3d& R_sensor_world, const Eigen::Vec
     const F4 zs = z > tiny ? z : one;
     const F4 a = x / zs;
     const F4 ny = -y;
-    const F4 e = ny * (ny < 0 ? -ny : ny) / (x * x + zs * zs);
+    const F4 e = ny * (ny < 0 ? -ny : ny) / (over_z ? zs * zs : x * x + zs * zs);
     std::memcpy(pz + n, &z, sizeof z);
     std::memcpy(az + n, &a, sizeof a);
     std::memcpy(el + n, &e, sizeof e);

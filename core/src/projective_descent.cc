@@ -162,14 +162,8 @@ inline Descent::Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_s
                  1, std::max(1, options.max_subrays_per_axis));
   known_near_ = Bounds(0.5);
   known_far_ = Bounds(0.5 / k_far);
-  for (int c = 0; c < tess_.cols(); ++c) {
-    col_centres_.push_back(
-        std::tan(-0.5 * grid.spec().fov_h_rad + (c + 0.5) * tess_.beam_width_h_rad()));
-  }
-  for (int r = 0; r < tess_.rows(); ++r) {
-    row_centres_.push_back(
-        std::tan(0.5 * grid.spec().fov_v_rad - (r + 0.5) * tess_.beam_width_v_rad()));
-  }
+  for (int c = 0; c < tess_.cols(); ++c) col_centres_.push_back(tess_.ColumnCentreTangent(c));
+  for (int r = 0; r < tess_.rows(); ++r) row_centres_.push_back(tess_.RowCentreTangent(r));
   // Every direction of the field of view has z >= cone_ * |p| (its corners lean the most).
   const double ta = std::max(std::abs(tess_.TanAzimuthMin()), std::abs(tess_.TanAzimuthMax()));
   const double te = std::max(std::abs(tess_.TanElevationMin()), std::abs(tess_.TanElevationMax()));
@@ -187,7 +181,7 @@ inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key
   Eigen::Vector3d lo;
   for (int a = 0; a < 3; ++a) lo[a] = (key_min[a] - kMapKeyOffset) * res;
   F4 point[27];
-  CornerAngles(Rt_, origin_, lo, child_size, point);
+  CornerAngles(Rt_, origin_, lo, child_size, tess_.pinhole(), point);
   double near2[3][2], far2[3][2];
   SlabDistances(origin_, lo, child_size, near2, far2);
   std::array<const MapNode*, 8> next = map.lo;
@@ -283,12 +277,8 @@ inline bool Descent::Saturated(const MapHere& m) const {
 }
 
 inline Descent::TanBounds Descent::Bounds(double inset) const {
-  const double w = inset * tess_.beam_width_h_rad();
-  const double h = inset * tess_.beam_width_v_rad();
-  return {std::tan(std::atan(tess_.TanAzimuthMin()) + w),
-          std::tan(std::atan(tess_.TanAzimuthMax()) - w),
-          std::tan(std::atan(tess_.TanElevationMin()) + h),
-          std::tan(std::atan(tess_.TanElevationMax()) - h)};
+  const BeamTessellation::TangentBounds b = tess_.InsetTangents(inset);
+  return {b.az_min, b.az_max, b.el_min, b.el_max};
 }
 
 inline Descent::Verdict Descent::Classify(unsigned depth, Box& box, const Aggregate& parent,
@@ -302,9 +292,10 @@ inline Descent::Verdict Descent::Classify(unsigned depth, Box& box, const Aggreg
     if (!voxel) v.kind = Kind::kMixed;
     return v;
   }
-  // Exact for azimuth (x / z is linear fractional: its extremes are at corners); the
-  // elevation tangent may peak inside a face, by at most size^2 / (2 r_lo^2) radians.
-  const double margin = box.size * box.size / (2.0 * box.r_lo2);
+  // Exact for azimuth (x / z is linear fractional: its extremes are at corners) and for a
+  // pinhole grid's -y / z; the elevation tangent may peak inside a face, by at most
+  // size^2 / (2 r_lo^2) radians.
+  const double margin = tess_.pinhole() ? 0.0 : box.size * box.size / (2.0 * box.r_lo2);
   box.el_lo -= margin * (1.0 + box.el_lo * box.el_lo);
   box.el_hi += margin * (1.0 + box.el_hi * box.el_hi);
   if (!fov_.Overlaps(box)) return v;

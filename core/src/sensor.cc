@@ -1,6 +1,7 @@
 // Sensor presets (paper Tables I and II) and spec validation.
 #include "fusion/core/sensor.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace fusion {
@@ -41,17 +42,98 @@ SensorSpec Stoc() {
   return s;
 }
 
+// A Kinect v1 (structured light, 640 x 480) with the TUM fr2 intrinsics (the data set's
+// published calibration). The forward model: fusion-calibrate on TUM fr2/pioneer_slam2 against
+// the floor fitted from the ground-truth-posed points (docs/sensors.md, "Calibrating a
+// sensor"). Range 0.5 m (the nearest the projector resolves) to 6 m.
+SensorSpec KinectV1() {
+  SensorSpec s;
+  s.name = "kinect_v1";
+  s.model = ForwardModelKind::kPaper3d;
+  s.r_min_m = 0.5;
+  s.r_max_m = 6.0;
+  SetPinhole({520.9, 521.0, 325.1, 249.7, 640, 480, 1}, &s);
+  s.q_mu = {0.0, 1.0, 0.0};
+  s.q_sigma = {0.0019, -0.00152, 0.001504};
+  s.epsilon = 0.02;
+  return s;
+}
+
+// A 3D laser scanner: a 2D scanner on a tilting unit, as OctoMap's sample scan was taken:
+// 184 x 41 degrees (azimuth -92..92, elevation -8..33: the scan's -91..91 x -7..32 and a
+// beam's margin), 0.25 degree beams, 0.3..30 m. Range noise constant: 15 mm, the systematic
+// error a SICK LMS 200 class scanner's data sheet gives (its statistical error, 5 mm 1 sigma,
+// is smaller; the tilting unit's pose error adds to both at range).
+SensorSpec Laser3d() {
+  SensorSpec s;
+  s.name = "laser_3d";
+  s.model = ForwardModelKind::kPaper3d;
+  s.r_min_m = 0.3;
+  s.r_max_m = 30.0;
+  SetAngularLimits(DegToRad(-92.0), DegToRad(92.0), DegToRad(-8.0), DegToRad(33.0), &s);
+  s.cols = 736;
+  s.rows = 164;
+  s.q_mu = {0.0, 1.0, 0.0};
+  s.q_sigma = {0.0, 0.0, 0.015};
+  s.epsilon = 0.02;
+  return s;
+}
+
 bool Finite(double v) { return std::isfinite(v); }
 
+std::string ValidatePinhole(const SensorSpec& spec) {
+  const PinholeIntrinsics& k = *spec.pinhole;
+  if (!(k.fx_px > 0.0) || !(k.fy_px > 0.0) || !Finite(k.fx_px) || !Finite(k.fy_px)) {
+    return "pinhole focal lengths must be finite and > 0";
+  }
+  if (!Finite(k.cx_px) || !Finite(k.cy_px)) return "pinhole principal point must be finite";
+  if (k.width_px < 1 || k.height_px < 1 || k.stride < 1) {
+    return "pinhole image must be at least 1 x 1 pixels with a stride >= 1";
+  }
+  if (spec.cols != (k.width_px + k.stride - 1) / k.stride ||
+      spec.rows != (k.height_px + k.stride - 1) / k.stride) {
+    return "cols and rows must be the pinhole's strided image size";
+  }
+  return {};
+}
+
 }  // namespace
+
+void SetPinhole(const PinholeIntrinsics& k, SensorSpec* spec) {
+  spec->pinhole = k;
+  const int stride = std::max(1, k.stride);
+  spec->cols = (k.width_px + stride - 1) / stride;
+  spec->rows = (k.height_px + stride - 1) / stride;
+  // The image's edges as angles (pixel u covers [u - 0.5, u + 0.5)); the vertical ones at
+  // azimuth 0, where elevation and the image's y / z agree.
+  const double left = std::atan((-0.5 - k.cx_px) / k.fx_px);
+  const double right = std::atan((k.width_px - 0.5 - k.cx_px) / k.fx_px);
+  const double top = std::atan((k.cy_px + 0.5) / k.fy_px);
+  const double bottom = std::atan((k.cy_px - k.height_px + 0.5) / k.fy_px);
+  spec->fov_h_rad = right - left;
+  spec->fov_v_rad = top - bottom;
+  spec->azimuth_centre_rad = 0.5 * (left + right);
+  spec->elevation_centre_rad = 0.5 * (top + bottom);
+}
+
+void SetAngularLimits(double azimuth_min_rad, double azimuth_max_rad, double elevation_min_rad,
+                      double elevation_max_rad, SensorSpec* spec) {
+  spec->pinhole.reset();
+  spec->fov_h_rad = azimuth_max_rad - azimuth_min_rad;
+  spec->fov_v_rad = elevation_max_rad - elevation_min_rad;
+  spec->azimuth_centre_rad = 0.5 * (azimuth_min_rad + azimuth_max_rad);
+  spec->elevation_centre_rad = 0.5 * (elevation_min_rad + elevation_max_rad);
+}
 
 std::optional<SensorSpec> SensorPreset(const std::string& name) {
   if (name == "sr3000") return Sr3000();
   if (name == "stoc") return Stoc();
+  if (name == "kinect_v1") return KinectV1();
+  if (name == "laser_3d") return Laser3d();
   return std::nullopt;
 }
 
-std::vector<std::string> SensorPresetNames() { return {"sr3000", "stoc"}; }
+std::vector<std::string> SensorPresetNames() { return {"sr3000", "stoc", "kinect_v1", "laser_3d"}; }
 
 std::string ValidateSensorSpec(const SensorSpec& spec) {
   if (!Finite(spec.r_min_m) || spec.r_min_m < 0.0) return "r_min_m must be finite and >= 0";
@@ -60,10 +142,26 @@ std::string ValidateSensorSpec(const SensorSpec& spec) {
   }
   if (!(spec.epsilon > 0.0 && spec.epsilon < 1.0)) return "epsilon must be in (0, 1)";
   if (!(spec.delta > 0.0) || !Finite(spec.delta)) return "delta must be finite and > 0";
+  // A pinhole's field of view follows from its intrinsics: those are what to name.
+  if (spec.pinhole) {
+    if (std::string e = ValidatePinhole(spec); !e.empty()) return e;
+  }
   if (!(spec.fov_h_rad > 0.0 && spec.fov_h_rad <= 2.0 * kPi))
     return "fov_h_rad must be in (0, 2 pi]";
   if (!(spec.fov_v_rad > 0.0 && spec.fov_v_rad < kPi)) return "fov_v_rad must be in (0, pi)";
   if (spec.cols < 1 || spec.rows < 1) return "cols and rows must be >= 1";
+  // A little slack for limits given in degrees (180 / 90 converted to radians).
+  constexpr double kSlack = 1e-9;
+  if (!Finite(spec.azimuth_centre_rad) ||
+      std::abs(spec.azimuth_centre_rad) + 0.5 * spec.fov_h_rad > kPi + kSlack) {
+    return "azimuth_centre_rad and fov_h_rad must keep the field of view within azimuth "
+           "-180..180 degrees";
+  }
+  if (!Finite(spec.elevation_centre_rad) ||
+      !(std::abs(spec.elevation_centre_rad) + 0.5 * spec.fov_v_rad < 0.5 * kPi)) {
+    return "elevation_centre_rad and fov_v_rad must keep the field of view within elevation "
+           "-90..90 degrees (exclusive)";
+  }
   for (double c : {spec.q_mu.a0, spec.q_mu.a1, spec.q_mu.a2, spec.q_sigma.a0, spec.q_sigma.a1,
                    spec.q_sigma.a2}) {
     if (!Finite(c)) return "polynomial coefficients must be finite";

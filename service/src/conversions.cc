@@ -63,21 +63,105 @@ StatusOr<SensorSpec> BaseSpecFromConfig(const fusion::v1::SensorConfig& c) {
   if (!c.preset().empty()) {
     auto preset = SensorPreset(c.preset());
     if (!preset) {
-      return Status::Error("preset: '" + c.preset() + "' is not a known preset (sr3000, stoc)");
+      std::string names;
+      for (const auto& n : SensorPresetNames()) names += (names.empty() ? "" : ", ") + n;
+      return Status::Error("preset: '" + c.preset() + "' is not a known preset (" + names + ")");
     }
     return *preset;
   }
-  const char* missing = !c.has_r_min_m()     ? "r_min_m"
-                        : !c.has_r_max_m()   ? "r_max_m"
-                        : !c.has_fov_h_deg() ? "fov_h_deg"
-                        : !c.has_fov_v_deg() ? "fov_v_deg"
-                        : !c.has_cols()      ? "cols"
-                        : !c.has_rows()      ? "rows"
-                        : !c.has_q_mu()      ? "q_mu"
-                        : !c.has_q_sigma()   ? "q_sigma"
-                                             : nullptr;
-  if (missing != nullptr) return Status::Error(std::string(missing) + ": required when no preset is given");
+  const bool angular = !c.has_pinhole();
+  const char* missing = !c.has_r_min_m()                                       ? "r_min_m"
+                        : !c.has_r_max_m()                                     ? "r_max_m"
+                        : angular && !c.has_fov_h_deg() && !c.has_azimuth_min_deg() ? "fov_h_deg"
+                        : angular && !c.has_fov_v_deg() && !c.has_elevation_min_deg()
+                            ? "fov_v_deg"
+                        : angular && !c.has_cols() ? "cols"
+                        : angular && !c.has_rows() ? "rows"
+                        : !c.has_q_mu()            ? "q_mu"
+                        : !c.has_q_sigma()         ? "q_sigma"
+                                                   : nullptr;
+  if (missing != nullptr) {
+    return Status::Error(std::string(missing) + ": required when no preset is given" +
+                         (angular ? " (or a pinhole block)" : ""));
+  }
   return SensorSpec{};
+}
+
+// A pinhole block over `spec`: the full intrinsics, or only a stride over a pinhole preset.
+Status ApplyPinhole(const fusion::v1::PinholeConfig& p, SensorSpec* spec) {
+  constexpr std::uint32_t kMaxPixels = 1u << 16;
+  if (p.width() > kMaxPixels || p.height() > kMaxPixels || p.stride() > kMaxPixels) {
+    return Status::Error("pinhole: width, height and stride must be at most 65536");
+  }
+  PinholeIntrinsics k;
+  const bool full = p.fx() != 0.0 || p.fy() != 0.0 || p.width() != 0 || p.height() != 0;
+  if (full) {
+    k = {p.fx(), p.fy(), p.cx(), p.cy(), static_cast<int>(p.width()),
+         static_cast<int>(p.height()), 1};
+  } else if (spec->pinhole) {
+    k = *spec->pinhole;
+  } else {
+    return Status::Error("pinhole: fx, fy, cx, cy, width and height are required (only the "
+                         "stride may be given alone, over a pinhole preset)");
+  }
+  k.stride = static_cast<int>(std::max<std::uint32_t>(1, p.stride()));
+  SetPinhole(k, spec);
+  return Status::Ok();
+}
+
+// The angular field of view and beams the file sets: symmetric widths or the limits of an
+// asymmetric one, cols and rows; a pinhole block instead of all of them.
+Status ApplyGeometry(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
+  const bool az = c.has_azimuth_min_deg() || c.has_azimuth_max_deg();
+  const bool el = c.has_elevation_min_deg() || c.has_elevation_max_deg();
+  if (az && !(c.has_azimuth_min_deg() && c.has_azimuth_max_deg())) {
+    return Status::Error("azimuth_min_deg: give azimuth_min_deg and azimuth_max_deg together");
+  }
+  if (el && !(c.has_elevation_min_deg() && c.has_elevation_max_deg())) {
+    return Status::Error("elevation_min_deg: give elevation_min_deg and elevation_max_deg together");
+  }
+  if (az && c.has_fov_h_deg()) {
+    return Status::Error("fov_h_deg: give fov_h_deg or azimuth_min_deg / azimuth_max_deg, not both");
+  }
+  if (el && c.has_fov_v_deg()) {
+    return Status::Error("fov_v_deg: give fov_v_deg or elevation_min_deg / elevation_max_deg, not both");
+  }
+  const bool h = az || c.has_fov_h_deg(), v = el || c.has_fov_v_deg();
+  const bool angular = h || v || c.has_cols() || c.has_rows();
+  if (c.has_pinhole()) {
+    if (angular) {
+      return Status::Error("pinhole: a camera's beams follow from its intrinsics; give pinhole or "
+                           "the angular fields (fov_*, azimuth / elevation limits, cols, rows)");
+    }
+    return ApplyPinhole(c.pinhole(), spec);
+  }
+  if (!angular) return Status::Ok();
+  if (spec->pinhole) {
+    if (!(h && v && c.has_cols() && c.has_rows())) {
+      return Status::Error("cols: over a pinhole preset an angular grid needs its field of view, "
+                           "cols and rows");
+    }
+    spec->pinhole.reset();
+  }
+  if (c.has_fov_h_deg()) {
+    spec->fov_h_rad = c.fov_h_deg() * kDegToRad;
+    spec->azimuth_centre_rad = 0.0;
+  }
+  if (c.has_fov_v_deg()) {
+    spec->fov_v_rad = c.fov_v_deg() * kDegToRad;
+    spec->elevation_centre_rad = 0.0;
+  }
+  if (az) {
+    spec->fov_h_rad = (c.azimuth_max_deg() - c.azimuth_min_deg()) * kDegToRad;
+    spec->azimuth_centre_rad = 0.5 * (c.azimuth_min_deg() + c.azimuth_max_deg()) * kDegToRad;
+  }
+  if (el) {
+    spec->fov_v_rad = (c.elevation_max_deg() - c.elevation_min_deg()) * kDegToRad;
+    spec->elevation_centre_rad = 0.5 * (c.elevation_min_deg() + c.elevation_max_deg()) * kDegToRad;
+  }
+  if (c.has_cols()) spec->cols = static_cast<int>(std::min<std::uint32_t>(c.cols(), 1u << 30));
+  if (c.has_rows()) spec->rows = static_cast<int>(std::min<std::uint32_t>(c.rows(), 1u << 30));
+  return Status::Ok();
 }
 
 // The fields the file sets over the base spec, then core's checks, named as the file's fields.
@@ -92,10 +176,7 @@ Status ApplySpecFields(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
   }
   if (c.has_r_min_m()) spec->r_min_m = c.r_min_m();
   if (c.has_r_max_m()) spec->r_max_m = c.r_max_m();
-  if (c.has_fov_h_deg()) spec->fov_h_rad = c.fov_h_deg() * kDegToRad;
-  if (c.has_fov_v_deg()) spec->fov_v_rad = c.fov_v_deg() * kDegToRad;
-  if (c.has_cols()) spec->cols = static_cast<int>(std::min<std::uint32_t>(c.cols(), 1u << 30));
-  if (c.has_rows()) spec->rows = static_cast<int>(std::min<std::uint32_t>(c.rows(), 1u << 30));
+  if (Status s = ApplyGeometry(c, spec); !s.ok()) return s;
   if (c.has_q_mu()) spec->q_mu = PolynomialFromConfig(c.q_mu());
   if (c.has_q_sigma()) spec->q_sigma = PolynomialFromConfig(c.q_sigma());
   if (c.has_epsilon()) spec->epsilon = c.epsilon();
@@ -110,6 +191,10 @@ Status ApplySpecFields(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
   std::string field = spec_error.substr(0, spec_error.find(' '));
   if (field == "fov_h_rad") field = "fov_h_deg";
   if (field == "fov_v_rad") field = "fov_v_deg";
+  if (field == "azimuth_centre_rad") field = c.has_azimuth_min_deg() ? "azimuth_min_deg" : "fov_h_deg";
+  if (field == "elevation_centre_rad") {
+    field = c.has_elevation_min_deg() ? "elevation_min_deg" : "fov_v_deg";
+  }
   return Status::Error(field + ": " + spec_error);
 }
 

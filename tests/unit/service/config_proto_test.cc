@@ -92,6 +92,27 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
       {"sensors { id: \"a\" preset: \"sr3000\" mount { qw: 2 } }", "sensors[0].mount"},
       {"sensors { id: \"a\" preset: \"sr3000\" model: \"magic\" }", "sensors[0].model"},
       {"sensors { id: \"a\" preset: \"sr3000\" queue_depth: 0 }", "sensors[0].queue_depth"},
+      {"sensors { id: \"a\" preset: \"laser_3d\" azimuth_min_deg: -30 }",
+       "sensors[0].azimuth_min_deg"},
+      {"sensors { id: \"a\" preset: \"sr3000\" fov_v_deg: 20 elevation_min_deg: -5 "
+       "elevation_max_deg: 5 }",
+       "sensors[0].fov_v_deg"},
+      {"sensors { id: \"a\" preset: \"sr3000\" elevation_min_deg: 10 elevation_max_deg: 95 }",
+       "sensors[0].elevation_min_deg"},
+      {"sensors { id: \"a\" preset: \"sr3000\" azimuth_min_deg: 100 azimuth_max_deg: 190 }",
+       "sensors[0].azimuth_min_deg"},
+      {"sensors { id: \"a\" preset: \"sr3000\" pinhole { stride: 2 } }", "sensors[0].pinhole"},
+      {"sensors { id: \"a\" preset: \"kinect_v1\" pinhole { stride: 2 } cols: 10 }",
+       "sensors[0].pinhole"},
+      {"sensors { id: \"a\" preset: \"kinect_v1\" cols: 10 rows: 10 }", "sensors[0].cols"},
+      {"sensors { id: \"a\" preset: \"kinect_v1\" pinhole { fx: -1 fy: 500 width: 64 "
+       "height: 48 } }",
+       "sensors[0].pinhole"},
+      {"sensors { id: \"a\" preset: \"kinect_v1\" pinhole { fx: 500 fy: 500 width: 100000 "
+       "height: 48 } }",
+       "sensors[0].pinhole"},
+      {"sensors { id: \"a\" r_min_m: 0.1 r_max_m: 5 q_mu { a1: 1 } q_sigma { a0: 0.01 } }",
+       "sensors[0].fov_h_deg"},
       {"map { resolution_m: 100 }", "map.resolution_m"},
       {"map { fusion_rule: \"average\" }", "map.fusion_rule"},
       {"map { pose_tolerance_deg: 500 }", "map.pose_tolerance_deg"},
@@ -164,6 +185,39 @@ TEST(ConfigProtoTest, FullExampleLoadsAndSensorsBecomeCoreSpecs) {
   auto options = WorldMapOptionsFromConfig(config.map());
   ASSERT_TRUE(options.ok()) << options.status().message();
   EXPECT_EQ(options->rule, FusionRule::kIndependentOpinionPool);
+}
+
+// A camera by its intrinsics (or a preset's with another stride) and a scanner by its limits
+// become the core specs they describe.
+TEST(ConfigProtoTest, PinholeAndAsymmetricSensorsBecomeCoreSpecs) {
+  fusion::v1::ServiceConfig config;
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "sensors { id: \"kinect\" preset: \"kinect_v1\" pinhole { stride: 4 } }\n"
+      "sensors { id: \"cam\" r_min_m: 0.2 r_max_m: 4 q_mu { a1: 1 } q_sigma { a0: 0.01 }\n"
+      "  pinhole { fx: 300 fy: 310 cx: 100.5 cy: 60.25 width: 200 height: 120 } }\n"
+      "sensors { id: \"scan\" preset: \"laser_3d\" azimuth_min_deg: -60 azimuth_max_deg: 30\n"
+      "  elevation_min_deg: -7 elevation_max_deg: 32 cols: 360 rows: 156 }\n",
+      &config));
+  auto kinect = SensorSetupFromConfig(config.sensors(0));
+  ASSERT_TRUE(kinect.ok()) << kinect.status().message();
+  ASSERT_TRUE(kinect->spec.pinhole.has_value());
+  EXPECT_EQ(kinect->spec.pinhole->stride, 4);
+  EXPECT_DOUBLE_EQ(kinect->spec.pinhole->fx_px, 520.9);
+  EXPECT_EQ(kinect->spec.cols, 160);
+  EXPECT_EQ(kinect->spec.rows, 120);
+  auto cam = SensorSetupFromConfig(config.sensors(1));
+  ASSERT_TRUE(cam.ok()) << cam.status().message();
+  ASSERT_TRUE(cam->spec.pinhole.has_value());
+  EXPECT_DOUBLE_EQ(cam->spec.pinhole->cy_px, 60.25);
+  EXPECT_EQ(cam->spec.cols, 200);
+  EXPECT_EQ(cam->spec.rows, 120);
+  auto scan = SensorSetupFromConfig(config.sensors(2));
+  ASSERT_TRUE(scan.ok()) << scan.status().message();
+  EXPECT_FALSE(scan->spec.pinhole.has_value());
+  EXPECT_NEAR(scan->spec.fov_h_rad, 90.0 * M_PI / 180.0, 1e-12);
+  EXPECT_NEAR(scan->spec.azimuth_centre_rad, -15.0 * M_PI / 180.0, 1e-12);
+  EXPECT_NEAR(scan->spec.fov_v_rad, 39.0 * M_PI / 180.0, 1e-12);
+  EXPECT_NEAR(scan->spec.elevation_centre_rad, 12.5 * M_PI / 180.0, 1e-12);
 }
 
 TEST(ConfigProtoTest, SensorFlagAddsAPresetSensor) {

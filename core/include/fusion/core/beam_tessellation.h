@@ -1,5 +1,5 @@
 // A sensor's field of view cut into beams: a uniform azimuth x elevation grid (paper Sec.
-// II-C), and which beam a direction falls in.
+// II-C), or a camera's (strided) pixels; and which beam a direction falls in.
 #pragma once
 
 #include <Eigen/Core>
@@ -11,30 +11,42 @@
 
 namespace fusion {
 
-// Beams on a uniform azimuth x elevation grid over the sensor's FOV.
-// azimuth = atan2(x, z) in [-fov_h/2, fov_h/2], column 0 at the left (x < 0);
-// elevation = atan2(-y, hypot(x, z)) in [-fov_v/2, fov_v/2], row 0 at the top.
+// Angular (spec.pinhole unset): beams on a uniform azimuth x elevation grid over the sensor's
+// FOV, azimuth = atan2(x, z) in azimuth_centre +- fov_h / 2, column 0 at the left (x < 0);
+// elevation = atan2(-y, hypot(x, z)) in elevation_centre +- fov_v / 2, row 0 at the top.
+// Pinhole: beam (col, row) holds the pixels [col s, (col + 1) s) x [row s, (row + 1) s) of the
+// image (stride s, clipped to the image): a direction's column follows from x / z, its row from
+// y / z, exactly as the camera projects it.
 // beam index = row * cols + col. A direction exactly on the FOV edge belongs to the edge beam.
 // Range along a beam is the Euclidean norm of the point (not its projection on the axis).
+//
+// The "elevation tangent" below is a direction's row coordinate: -y / hypot(x, z) (the tangent
+// of its elevation) for angular grids, -y / z for pinhole ones; both grow upwards.
 class BeamTessellation {
  public:
   explicit BeamTessellation(const SensorSpec& spec);
   [[nodiscard]] std::size_t beam_count() const;
   [[nodiscard]] int cols() const;
   [[nodiscard]] int rows() const;
+  [[nodiscard]] bool pinhole() const { return pinhole_.has_value(); }
   // Beam of a direction in the sensor frame, std::nullopt outside the FOV or for a zero vector.
-  // For FOVs narrower than 180 degrees both angles are compared through their tangents with
-  // the beam edges' (x / z and -y / hypot(x, z) against tables: no atan2); directions within
-  // ~1e-15 rad of an edge may fall on either side of it.
+  // Where the grid has tangent tables (below) both coordinates are compared through tangents
+  // with the beam edges' (x / z and the elevation tangent against tables: no atan2);
+  // directions within ~1e-15 rad of an edge may fall on either side of it.
   [[nodiscard]] std::optional<std::size_t> BeamOf(const Eigen::Vector3d& p_sensor) const;
-  // The same by the definition above (two atan2 per direction): the reference.
+  // The same by the definition above (angular: two atan2 per direction; pinhole: the pixel the
+  // camera projects it to): the reference.
   [[nodiscard]] std::optional<std::size_t> BeamOfByAngles(const Eigen::Vector3d& p_sensor) const;
   // Unit vector of the beam's centre line in the sensor frame.
   [[nodiscard]] Eigen::Vector3d Direction(std::size_t beam) const;
-  // FOVs narrower than 180 degrees have tangent tables (BeamOf uses them; so does the
-  // projective render, which needs the beams a box of space overlaps): the tangents of the FOV
-  // edges, and the column / row whose beam holds a direction with the given tangent of azimuth
-  // (x / z) / elevation (-y / hypot(x, z)), clamped into the grid.
+  // A unit direction inside the beam, `right` and `up` of its centre line in fractions of the
+  // beam's width and height (-0.5 .. 0.5 reach its edges): angular grids step in azimuth and
+  // elevation, pinhole ones on the image plane. Direction(beam) is SubDirection(beam, 0, 0).
+  [[nodiscard]] Eigen::Vector3d SubDirection(std::size_t beam, double right, double up) const;
+  // Grids whose azimuths stay within +-90 degrees (and every pinhole grid) have tangent tables
+  // (BeamOf uses them; so does the projective render, which needs the beams a box of space
+  // overlaps): the tangents of the FOV edges, and the column / row whose beam holds a direction
+  // with the given azimuth tangent (x / z) / elevation tangent, clamped into the grid.
   [[nodiscard]] bool HasTangentEdges() const { return !tan_col_edges_.empty(); }
   [[nodiscard]] double TanAzimuthMin() const { return tan_col_edges_.lo(); }
   [[nodiscard]] double TanAzimuthMax() const { return tan_col_edges_.hi(); }
@@ -42,15 +54,34 @@ class BeamTessellation {
   [[nodiscard]] double TanElevationMax() const { return tan_row_edges_.hi(); }
   [[nodiscard]] int ColumnOfTangent(double tan_azimuth) const;
   [[nodiscard]] int RowOfTangent(double tan_elevation) const;
-  // Angular size of one beam (full widths).
+  // Tangents of a column's / row's centre line (azimuth tangent, elevation tangent).
+  [[nodiscard]] double ColumnCentreTangent(int col) const;
+  [[nodiscard]] double RowCentreTangent(int row) const;
+  // The tangent bounds of the field of view with each side moved in by `beams` beam widths (at
+  // 0.5: the centre lines of the edge beams), in the order az_min, az_max, el_min, el_max.
+  struct TangentBounds {
+    double az_min, az_max, el_min, el_max;
+  };
+  [[nodiscard]] TangentBounds InsetTangents(double beams) const;
+  // Angular size of one beam (full widths); for pinhole grids the largest beam's (at the
+  // image centre), an upper bound of every beam's.
   [[nodiscard]] double beam_width_h_rad() const;
   [[nodiscard]] double beam_width_v_rad() const;
 
  private:
+  // A pinhole beam's span on the image, in continuous pixel coordinates (pixel u covers
+  // [u - 0.5, u + 0.5)): its first pixel's left edge and its width in pixels.
+  struct PixelSpan {
+    double lo, width;
+  };
+  [[nodiscard]] PixelSpan SpanOf(int index, int pixels) const;
   int cols_ = 1;
   int rows_ = 1;
   double fov_h_rad_ = 0.0;
   double fov_v_rad_ = 0.0;
+  double azimuth_min_rad_ = 0.0;    // the left edge
+  double elevation_max_rad_ = 0.0;  // the top edge
+  std::optional<PinholeIntrinsics> pinhole_;
   // Ascending edges (n + 1 values) with a uniform bucket index over them, so that the inner
   // edges below a value are counted in ~one step instead of a binary search.
   class Edges {
@@ -72,7 +103,7 @@ class BeamTessellation {
     double inverse_bucket_ = 0.0;
   };
   // Tangents of the column edges (left to right) and of the row edges (bottom to top); empty
-  // when a FOV reaches 180 degrees (BeamOf then uses the angles).
+  // when an angular FOV reaches +-90 degrees in azimuth (BeamOf then uses the angles).
   Edges tan_col_edges_;
   Edges tan_row_edges_;
 };

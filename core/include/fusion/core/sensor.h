@@ -35,6 +35,19 @@ struct ClassicBeamParams {
   double lambda_short_per_m = 2.0;
 };
 
+// A camera's intrinsics in pixels (OpenCV's convention, as a ROS CameraInfo's K: pixel (u, v)
+// is centred at u = fx x / z + cx, v = fy y / z + cy in the optical frame and covers
+// [u - 0.5, u + 0.5) x [v - 0.5, v + 0.5)), and the pixels per beam along each axis.
+struct PinholeIntrinsics {
+  double fx_px = 0.0;
+  double fy_px = 0.0;
+  double cx_px = 0.0;
+  double cy_px = 0.0;
+  int width_px = 0;
+  int height_px = 0;
+  int stride = 1;  // beam (c, r) holds pixels [c s, (c + 1) s) x [r s, (r + 1) s), clipped
+};
+
 // Everything that describes one sensor, independent of where it is mounted.
 struct SensorSpec {
   std::string name;
@@ -45,8 +58,16 @@ struct SensorSpec {
   double r_max_m = 7.5;
   double fov_h_rad = 0.0;               // full horizontal field of view
   double fov_v_rad = 0.0;               // full vertical field of view
+  // Direction of the field of view's centre: azimuth (towards +x) and elevation (towards -y);
+  // 0, 0 (the default) is a field of view symmetric about the optical axis. SetAngularLimits
+  // sets these and the widths from a scanner's limits.
+  double azimuth_centre_rad = 0.0;
+  double elevation_centre_rad = 0.0;
   int cols = 1;                         // beams across (azimuth)
   int rows = 1;                         // beams down (elevation)
+  // Set: a camera, one beam per (strided) pixel, instead of beams uniform in angle. SetPinhole
+  // sets it together with cols, rows and the angular extent (fov_*, *_centre_rad) it implies.
+  std::optional<PinholeIntrinsics> pinhole;
   Polynomial2 q_mu{0.0, 1.0, 0.0};      // expected reading for a surface at range r
   Polynomial2 q_sigma{0.0, 0.0, 0.01};  // reading standard deviation at range r
   double epsilon = 0.01;                // paper's eps (total mass of the outlier part)
@@ -59,15 +80,30 @@ struct SensorSpec {
   bool range_unbounded = false;
 };
 
+// Makes `spec` a pinhole sensor with intrinsics `k`: sets pinhole, cols = ceil(width / stride),
+// rows = ceil(height / stride) and the image's angular extent (fov_h_rad, fov_v_rad and the
+// centres; the vertical one measured at azimuth 0).
+void SetPinhole(const PinholeIntrinsics& k, SensorSpec* spec);
+// An angular field of view between the given azimuths (right of the optical axis positive) and
+// elevations (up positive), radians: sets fov_*_rad and *_centre_rad, drops any pinhole.
+void SetAngularLimits(double azimuth_min_rad, double azimuth_max_rad, double elevation_min_rad,
+                      double elevation_max_rad, SensorSpec* spec);
+
 // Empty string if the spec can be used to build a forward model / beam grid, otherwise the
 // reason: r_min >= 0, r_max > r_min, 0 < epsilon < 1, delta > 0, 0 < fov_h <= 2 pi,
-// 0 < fov_v < pi, cols, rows >= 1, classic weights >= 0 with a positive sum, sigma_hit > 0.
+// 0 < fov_v < pi, the field of view within azimuth [-pi, pi] and elevation (-pi/2, pi/2),
+// cols, rows >= 1, a pinhole's focal lengths > 0, image >= 1 x 1, stride >= 1 and cols / rows
+// its strided image's, classic weights >= 0 with a positive sum, sigma_hit > 0.
 [[nodiscard]] std::string ValidateSensorSpec(const SensorSpec& spec);
 
-// Paper presets: "sr3000" (SwissRanger SR-3000) and "stoc" (Videre STOC stereo camera),
-// with exactly the coefficients of Tables I and II. std::nullopt for an unknown name.
-// STOC has r_max = inf in the paper; its preset uses a beam length r_max_m = 5.0 m and sets
-// range_unbounded. Both use the paper's 3D model (Algorithm III.1), epsilon = 0.01, Delta = 3.
+// Presets. The paper's "sr3000" (SwissRanger SR-3000) and "stoc" (Videre STOC stereo camera),
+// with exactly the coefficients of Tables I and II; STOC has r_max = inf in the paper, its
+// preset uses a beam length r_max_m = 5.0 m and sets range_unbounded. Both use the paper's 3D
+// model (Algorithm III.1), epsilon = 0.01, Delta = 3. "kinect_v1": a 640 x 480 pinhole depth
+// camera (the TUM fr2 intrinsics) with the forward model fitted by fusion-calibrate on the
+// TUM fr2/pioneer_slam2 recording; "laser_3d": a 3D laser scanner with constant range noise
+// and OctoMap's sample scan's field of view (docs/sensors.md names the sources).
+// std::nullopt for an unknown name.
 [[nodiscard]] std::optional<SensorSpec> SensorPreset(const std::string& name);
 [[nodiscard]] std::vector<std::string> SensorPresetNames();
 
