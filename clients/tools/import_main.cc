@@ -6,12 +6,14 @@
 #include <cstring>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include "fusion/clients/cli.h"
 #include "fusion/clients/importers.h"
 #include "fusion/clients/recording.h"
+#include "fusion/clients/sensor_block.h"
 
 namespace {
 
@@ -30,14 +32,19 @@ Subcommands:
   graph   OctoMap binary scan graph (.graph), one cloud per node
   scan    plain "x y z" text scans (.bz2 allowed), one cloud per file (or per NODE line)
 
-Every cloud keeps its points in the sensor frame (metres, NaN = no return) and the sensor's
-pose in the world frame. Inspect the result with: fusion-replay --list OUTPUT.frec
+Every cloud keeps its points in the sensor's optical frame (x right, y down, z forward;
+metres, NaN = no return) and that frame's pose in the world. Inspect the result with:
+fusion-replay --list OUTPUT.frec. --print-sensor prints the sensors { ... } block of
+fusiond's configuration that describes the data (see SUBCOMMAND --help).
 )";
 
 constexpr const char* kCommonOptions = R"(
 Common options:
   -o, --output FILE      recording to write (required)
   --sensor-id ID         sensor id of every cloud (default: %s)
+  --print-sensor         after importing, print the sensors { ... } block of fusiond's
+                         configuration (text format) for the data on stdout; everything
+                         else goes to stderr
   --help                 this text
 )";
 
@@ -52,6 +59,8 @@ optical axis in metres, 0 = missing -> NaN). Stamps come from the file names.
   --depth-scale UNITS   PNG units per metre (default 5000)
   --groundtruth FILE    pose list inside DIR (default groundtruth.txt)
   --max-frames N        stop after N frames (default: all)
+--print-sensor: preset "kinect_v1" with pinhole { fx fy cx cy width height stride } of the
+import (the image size read, --stride).
 )";
 
 constexpr const char* kPcdUsage = R"(fusion-import pcd FILE.pcd... -o OUT.frec [options]
@@ -64,25 +73,46 @@ frame and the viewpoint becomes the pose.
                                   whose VIEWPOINT is the identity or ignored
   --start-time S        stamp of the first cloud, seconds since the epoch (default 0)
   --period S            time between clouds in seconds (default 1)
+--print-sensor: organized clouds: pinhole { fx fy cx cy width height stride: 1 } fitted to
+the points (u = fx x/z + cx over the columns, v = fy y/z + cy over the rows) with r_min_m /
+r_max_m from the ranges seen; unorganized ones: the angular form of `scan --help`. No preset:
+add the noise model (q_mu, q_sigma) or a preset by hand.
 )";
 
 constexpr const char* kGraphUsage = R"(fusion-import graph FILE.graph -o OUT.frec [options]
 
 OctoMap's binary scan graph (octomap::ScanGraph::writeBinary, e.g. from log2graph): one cloud
 per node, points in the node frame, node pose -> sensor pose.
+  --frame optical|body  the frame of the nodes' points and poses (default optical: x right,
+                        y down, z forward). body (REP-103: x forward, y left, z up; OctoMap's
+                        scanners): points rotated into the optical frame, p_optical =
+                        R_optical_body p_body, and poses T_world_optical = T_world_node
+                        T_body_optical, so the world points stay where they were
   --start-time S        stamp of the first node (default 0)
   --period S            time between nodes in seconds (default 1)
+--print-sensor: as for scan.
 )";
 
 constexpr const char* kScanUsage = R"(fusion-import scan FILE... -o OUT.frec [options]
 
-Plain text, one "x y z" (metres, scanner frame) per line; FILE.bz2 is decompressed with
-bzip2 -dc. Lines "NODE x y z roll pitch yaw" (OctoMap log format) start a new cloud taken
-at that pose. Unorganized clouds (width = point count, height = 1).
-  --pose tx,ty,tz[,qx,qy,qz,qw]   scanner pose in the world for points before any NODE
-                                  line (default: the origin)
+Plain text, one "x y z" (metres, in the --frame) per line; FILE.bz2 is decompressed with
+bzip2 -dc. Lines "NODE x y z roll pitch yaw" (OctoMap log format: metres, radians) start a
+new cloud taken at that pose. Unorganized clouds (width = point count, height = 1).
+  --frame optical|body  the frame of the points, of --pose and of NODE poses (default
+                        optical: x right, y down, z forward, what fusiond reads). body
+                        (REP-103: x forward, y left, z up; OctoMap's sample scan and logs):
+                        points rotated into the optical frame, p_optical = R_optical_body
+                        p_body, and the recorded pose T_world_optical = T_world_body
+                        T_body_optical, so the world points stay R p + t
+  --pose tx,ty,tz[,qx,qy,qz,qw]   pose in the world (metres, Hamilton quaternion) of the
+                                  --frame for points before any NODE line (default: the
+                                  origin); a world point is R(q) p + t
   --start-time S        stamp of the first cloud (default 0)
   --period S            time between clouds in seconds (default 1)
+--print-sensor: preset "laser_3d" with the returns' extents in the optical frame (azimuth =
+atan2(x, z) to the right, elevation = atan2(-y, hypot(x, z)) up, degrees) widened by one
+beam each side, cols and rows of about the returns' spacing, r_min_m / r_max_m from the
+ranges seen.
 )";
 
 void PrintUsage(const char* text, const char* default_id) {
@@ -98,8 +128,9 @@ struct Options {
   std::string output, sensor_id;
   std::vector<std::string> inputs;
   fusion::clients::TumOptions tum;
-  fusion::v1::RecordedPose pose;  // --pose: sensor (pcd) or scanner (scan) in the world
-  bool pose_given = false, ignore_viewpoint = false;
+  fusion::v1::RecordedPose pose;  // --pose: sensor (pcd) or the --frame (scan) in the world
+  bool pose_given = false, ignore_viewpoint = false, print_sensor = false;
+  fusion::clients::PointFrame frame = fusion::clients::PointFrame::kOptical;  // scan, graph
   double start_time_s = 0, period_s = 1;  // stamps of pcd, graph and scan clouds
 };
 
@@ -165,6 +196,8 @@ bool ApplyValue(const std::string& arg, const std::string& v, Options* o, Status
   } else if ((o->sub == "pcd" || o->sub == "scan") && arg == "--pose") {
     *s = fusion::clients::ParsePose(arg, v, &o->pose);
     o->pose_given = true;
+  } else if ((o->sub == "graph" || o->sub == "scan") && arg == "--frame") {
+    *s = fusion::clients::ParsePointFrame(arg, v, &o->frame);
   } else if (arg == "--start-time") {
     *s = fusion::clients::ParseDouble(arg, v, &o->start_time_s);
   } else if (arg == "--period") {
@@ -186,6 +219,10 @@ std::optional<int> ParseOptions(int argc, char** argv, Options* o) {
     }
     if (o->sub == "pcd" && arg == "--ignore-viewpoint") {
       o->ignore_viewpoint = true;
+      continue;
+    }
+    if (arg == "--print-sensor") {
+      o->print_sensor = true;
       continue;
     }
     if (arg.size() <= 1 || arg[0] != '-') {
@@ -219,6 +256,8 @@ class Sink {
  public:
   Sink(const Options& o, fusion::clients::RecordingWriter* writer) : o_(o), writer_(writer) {}
   std::uint64_t points() const { return points_; }
+  // What --print-sensor describes: every cloud appended (but TUM's).
+  const fusion::clients::ImportedGeometry& geometry() const { return geometry_; }
 
   // Sensor id, sequence number from 1, stamp start_time + period x (number - 1).
   void Identify(fusion::v1::RecordedCloud* cloud, const std::string& origin) {
@@ -229,6 +268,7 @@ class Sink {
 
   Status Append(fusion::v1::RecordedCloud&& cloud) {
     points_ += cloud.xyz_f32le().size() / 12;
+    if (o_.print_sensor && o_.sub != "tum") geometry_.Add(cloud);  // TUM's: its options
     Status s = writer_->Append(cloud);
     if (s.ok() && tty_) {
       std::fprintf(stderr, "\rfusion-import: %llu clouds",
@@ -242,6 +282,7 @@ class Sink {
   fusion::clients::RecordingWriter* const writer_;
   const bool tty_ = isatty(STDERR_FILENO) != 0;  // a running count on a terminal
   std::uint64_t points_ = 0, sequence_ = 0;
+  fusion::clients::ImportedGeometry geometry_;
 };
 
 Status ImportPcdFiles(const Options& o, Sink* sink) {
@@ -276,6 +317,7 @@ Status ImportMultiCloudFiles(const Options& o, Sink* sink) {
                                 : fusion::clients::ReadXyzScan(path, o.pose, &clouds);
     if (!s.ok()) return s;
     for (auto& cloud : clouds) {
+      fusion::clients::ToOpticalFrame(o.frame, &cloud);
       sink->Identify(&cloud, path);
       if (s = sink->Append(std::move(cloud)); !s.ok()) return s;
     }
@@ -283,16 +325,37 @@ Status ImportMultiCloudFiles(const Options& o, Sink* sink) {
   return Status::Ok();
 }
 
-Status Import(Options* o, Sink* sink) {
+// *image: the size of TUM's depth images.
+Status Import(Options* o, Sink* sink, fusion::clients::ImageSize* image) {
   if (o->sub == "tum") {
     o->tum.directory = o->inputs[0];
     o->tum.sensor_id = o->sensor_id;
-    return fusion::clients::ImportTum(o->tum, [sink](fusion::v1::RecordedCloud&& cloud) {
-      return sink->Append(std::move(cloud));
-    });
+    return fusion::clients::ImportTum(
+        o->tum,
+        [sink](fusion::v1::RecordedCloud&& cloud) { return sink->Append(std::move(cloud)); },
+        image);
   }
   if (o->sub == "pcd") return ImportPcdFiles(*o, sink);
   return ImportMultiCloudFiles(*o, sink);
+}
+
+// --print-sensor: the block on stdout, notes on stderr.
+Status PrintSensor(const Options& o, const Sink& sink, const fusion::clients::ImageSize& image) {
+  fusion::v1::SensorConfig sensor;
+  std::string notes;
+  if (o.sub == "tum") {
+    sensor = fusion::clients::TumSensorConfig(o.tum, image);
+  } else if (Status s = sink.geometry().Describe(o.sensor_id, o.sub == "pcd" ? "" : "laser_3d",
+                                                 &sensor, &notes);
+             !s.ok()) {
+    return Status::Error("--print-sensor: " + s.message());
+  }
+  std::istringstream lines(notes);
+  for (std::string line; std::getline(lines, line);) {
+    std::fprintf(stderr, "fusion-import: %s\n", line.c_str());
+  }
+  std::fputs(fusion::clients::SensorBlockText(sensor).c_str(), stdout);
+  return Status::Ok();
 }
 
 }  // namespace
@@ -310,7 +373,8 @@ int main(int argc, char** argv) {
     return fusion::clients::Fail(kTool, s.message());
   }
   Sink sink(o, writer.get());
-  const Status status = Import(&o, &sink);
+  fusion::clients::ImageSize image;
+  const Status status = Import(&o, &sink, &image);
   if (isatty(STDERR_FILENO) != 0 && writer->records_written() > 0) std::fputc('\n', stderr);
   const Status closed = writer->Close();
   if (!status.ok() && writer->records_written() == 0) {
@@ -324,8 +388,13 @@ int main(int argc, char** argv) {
                                             " clouds imported before the error");
   }
   if (!closed.ok()) return fusion::clients::Fail(kTool, closed.message());
-  std::printf("imported %llu clouds (%llu points) into %s\n",
-              static_cast<unsigned long long>(writer->records_written()),
-              static_cast<unsigned long long>(sink.points()), o.output.c_str());
+  std::fprintf(o.print_sensor ? stderr : stdout, "%simported %llu clouds (%llu points) into %s\n",
+               o.print_sensor ? "fusion-import: " : "",
+               static_cast<unsigned long long>(writer->records_written()),
+               static_cast<unsigned long long>(sink.points()), o.output.c_str());
+  if (o.print_sensor) {
+    if (Status s = PrintSensor(o, sink, image); !s.ok())
+      return fusion::clients::Fail(kTool, s.message());
+  }
   return fusion::clients::kExitOk;
 }

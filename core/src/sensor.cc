@@ -59,11 +59,12 @@ SensorSpec KinectV1() {
   return s;
 }
 
-// A 3D laser scanner: a 2D scanner on a tilting unit, as OctoMap's sample scan was taken:
-// 184 x 41 degrees (azimuth -92..92, elevation -8..33: the scan's -91..91 x -7..32 and a
-// beam's margin), 0.25 degree beams, 0.3..30 m. Range noise constant: 15 mm, the systematic
-// error a SICK LMS 200 class scanner's data sheet gives (its statistical error, 5 mm 1 sigma,
-// is smaller; the tilting unit's pose error adds to both at range).
+// A 3D laser scanner: a 2D scanner on a tilting unit, as OctoMap's sample scan was taken (497
+// sweeps of 1-degree steps across, ~0.08 degrees of tilt apart): 184 x 41 degrees (azimuth
+// -92..92, elevation -8..33: the scan's -91..91 x -7..32 and a margin), 0.5-degree beams (half
+// the azimuth step; several sweeps a row), 0.3..30 m. Range noise constant: 15 mm, the
+// systematic error a SICK LMS 200 class scanner's data sheet gives (its statistical error,
+// 5 mm 1 sigma, is smaller; the tilting unit's pose error adds to both at range).
 SensorSpec Laser3d() {
   SensorSpec s;
   s.name = "laser_3d";
@@ -71,8 +72,8 @@ SensorSpec Laser3d() {
   s.r_min_m = 0.3;
   s.r_max_m = 30.0;
   SetAngularLimits(DegToRad(-92.0), DegToRad(92.0), DegToRad(-8.0), DegToRad(33.0), &s);
-  s.cols = 736;
-  s.rows = 164;
+  s.cols = 368;
+  s.rows = 82;
   s.q_mu = {0.0, 1.0, 0.0};
   s.q_sigma = {0.0, 0.0, 0.015};
   s.epsilon = 0.02;

@@ -1,9 +1,8 @@
 // End to end with a real 3D laser scan: OctoMap's sample scan (88,206 points in the scanner
 // frame: x forward, y left, z up; 180 degrees sideways, -7..+32 degrees up, 0.47..29 m)
-// re-expressed in the optical-frame convention, imported with fusion-import scan and a --pose
-// that turns the optical frame back into the scanner's, replayed into a fusiond process with a
-// 184 x 66 degree sensor of 0.5 degree beams, and queried over gRPC: voxels at the points are
-// occupied, half-way to them free.
+// imported with fusion-import scan --frame body and the scanner's --pose, replayed into a
+// fusiond process with a 184 x 66 degree sensor of 0.5 degree beams, and queried over gRPC:
+// voxels at the points are occupied, half-way to them free.
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -58,19 +57,11 @@ std::size_t CountState(const std::vector<v1::PointOccupancy>& results, v1::Voxel
 }
 
 // The scanner's axes, from the data: x forward (azimuth atan2(y, x) spans -91..+91 deg, x
-// from -0.08 to 27 m), y left, z up (elevation -7..+32 deg, the ground at z ~ -0.1 m).
-// The optical frame (x right, y down, z forward) in the scanner frame: x_o = -y_s,
-// y_o = -z_s, z_o = x_s. With the scanner at kScannerInWorld = (1, 2, 0.5) in the world (axes
-// as the scanner's), the pose of the optical frame is that rotation: q = (-0.5, 0.5, -0.5, 0.5).
+// from -0.08 to 27 m), y left, z up (elevation -7..+32 deg, the ground at z ~ -0.1 m): the
+// body frame of --frame body. The scanner is at kScannerInWorld = (1, 2, 0.5) in the world
+// (axes as the scanner's), so the recorded pose of the optical frame (x_o = -y_s, y_o = -z_s,
+// z_o = x_s) is that rotation: q = (-0.5, 0.5, -0.5, 0.5).
 const Eigen::Vector3d kScannerInWorld(1.0, 2.0, 0.5);
-
-Eigen::Matrix3d R_scanner_optical() {
-  Eigen::Matrix3d R;
-  R.col(0) = Eigen::Vector3d(0, -1, 0);
-  R.col(1) = Eigen::Vector3d(0, 0, -1);
-  R.col(2) = Eigen::Vector3d(1, 0, 0);
-  return R;
-}
 
 class E2eLaserScanTest : public E2eService {
  protected:
@@ -85,35 +76,27 @@ class E2eLaserScanTest : public E2eService {
   // The steps of PointsAreOccupiedAndRaysFree; the test calls each in ASSERT_NO_FATAL_FAILURE,
   // so that a failed ASSERT in a step ends the test as it did when the steps were inline.
 
-  // The scan in the optical frame, imported with its pose into `recording`; *world: the
-  // recording's points in the world frame.
+  // The scan file (scanner frame) imported with --frame body and the scanner's pose into
+  // `recording`; *world: the recording's points in the world frame.
   void ImportTheScan(const std::vector<Eigen::Vector3d>& scan, const std::string& recording,
                      std::vector<Eigen::Vector3d>* world) {
-    const Eigen::Matrix3d R = R_scanner_optical();
     const Eigen::Vector3d& t = kScannerInWorld;
-    const Eigen::Quaterniond q(R);
-    ASSERT_NEAR(std::abs(q.x()), 0.5, 1e-12);  // (-0.5, 0.5, -0.5, 0.5) or its negation
-    const std::string text = dir_ + "/scan_optical.txt";
-    {
-      std::ofstream out(text);
-      out.precision(9);
-      for (const auto& p : scan) {
-        const Eigen::Vector3d o = R.transpose() * p;
-        out << o.x() << ' ' << o.y() << ' ' << o.z() << '\n';
-      }
-    }
     std::ostringstream pose;
     pose.precision(17);
-    pose << t.x() << ',' << t.y() << ',' << t.z() << ',' << q.x() << ',' << q.y() << ',' << q.z()
-         << ',' << q.w();
+    pose << t.x() << ',' << t.y() << ',' << t.z();
     std::string out;
-    ASSERT_EQ(RunTool({"fusion-import", "scan", text, "--pose", pose.str(), "--sensor-id",
-                       "scanner", "-o", recording},
+    ASSERT_EQ(RunTool({"fusion-import", "scan", kScan, "--frame", "body", "--pose", pose.str(),
+                       "--sensor-id", "scanner", "-o", recording},
                       &out),
               0)
         << out;
     const auto clouds = ReadRecording(recording);
     ASSERT_EQ(clouds.size(), 1u);
+    const auto& q = clouds[0].t_world_sensor();
+    ASSERT_NEAR(std::abs(q.qx()), 0.5, 1e-12);  // (-0.5, 0.5, -0.5, 0.5) or its negation
+    ASSERT_NEAR(q.qx() * q.qw(), -0.25, 1e-12);
+    ASSERT_NEAR(q.qy() * q.qw(), 0.25, 1e-12);
+    ASSERT_NEAR(q.qz() * q.qw(), -0.25, 1e-12);
     *world = WorldPoints(clouds[0]);
     ASSERT_EQ(world->size(), scan.size());
     // The recording's pose puts every point back where the scanner saw it (+ t).

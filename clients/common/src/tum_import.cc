@@ -78,7 +78,7 @@ void DepthToCloud(const TumOptions& options, std::uint32_t width, std::uint32_t 
 
 }  // namespace
 
-Status ImportTum(const TumOptions& options, const CloudSink& sink) {
+Status ImportTum(const TumOptions& options, const CloudSink& sink, ImageSize* image_size) {
   if (options.stride == 0) return Status::Error("--stride must be at least 1");
   if (!(options.fx_px > 0 && options.fy_px > 0 && options.depth_scale > 0)) {
     return Status::Error("focal lengths and depth scale must be positive");
@@ -101,6 +101,7 @@ Status ImportTum(const TumOptions& options, const CloudSink& sink) {
         !s.ok()) {
       return s.WithContext(where);
     }
+    if (image_size != nullptr) *image_size = {width, height};
     fusion::v1::RecordedCloud cloud;
     *cloud.mutable_t_world_sensor() = entry.t_world_optical;
     DepthToCloud(options, width, height, depth, &cloud);

@@ -212,7 +212,7 @@ TEST(AsymmetricTessellationTest, LimitsAreTheEdges) {
 
 // The laser scan of OctoMap's sample data (180 x -7..+32 degrees): held symmetrically about the
 // optical axis at 0.1 degree beams it needed 184 x 64.5 degrees, 1.19 M beams; the laser_3d
-// preset's asymmetric grid at the scanner's own angular step needs a tenth of that.
+// preset's asymmetric grid of 0.5-degree beams (half the scanner's azimuth step) needs 2.5 %.
 TEST(AsymmetricTessellationTest, TheScanNeedsAFractionOfTheSymmetricGrid) {
   SensorSpec symmetric = *SensorPreset("laser_3d");
   const double deg = 3.14159265358979323846 / 180.0;
@@ -222,6 +222,7 @@ TEST(AsymmetricTessellationTest, TheScanNeedsAFractionOfTheSymmetricGrid) {
   const BeamTessellation before(symmetric);
   const BeamTessellation after(*SensorPreset("laser_3d"));
   EXPECT_LE(after.beam_count() * 4, before.beam_count());
+  EXPECT_EQ(after.beam_count(), 368u * 82u);
 }
 
 }  // namespace

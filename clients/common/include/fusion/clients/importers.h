@@ -29,7 +29,12 @@ struct TumOptions {
   std::string sensor_id = "tum";
   std::uint64_t max_frames = 0;  // 0 = all
 };
-Status ImportTum(const TumOptions& options, const CloudSink& sink);
+// A depth image's size in pixels.
+struct ImageSize {
+  std::uint32_t width_px = 0, height_px = 0;
+};
+// *image_size (if given) receives the size of the depth images (of the last one read).
+Status ImportTum(const TumOptions& options, const CloudSink& sink, ImageSize* image_size = nullptr);
 
 // A 16-bit grayscale PNG as row-major values (width * height).
 Status ReadPng16(const std::string& path, std::uint32_t* width, std::uint32_t* height,
@@ -51,13 +56,26 @@ double FractionBehindSensor(const fusion::v1::RecordedCloud& cloud);
 // Plain text scans: one "x y z" per line (metres, scanner frame), optionally bzip2-compressed
 // (name ending in .bz2, decompressed through `bzip2 -dc`). Lines "NODE x y z roll pitch yaw"
 // (OctoMap's log format) start a new cloud taken at that pose; points before any NODE line
-// belong to a cloud at `pose`. '#' starts a comment. One cloud per node, unorganized.
+// belong to a cloud at `pose`. '#' starts a comment. One cloud per node, unorganized. The
+// points and poses stay in the file's frame: ToOpticalFrame below turns body-frame scans (and
+// scan graphs) into what fusiond reads.
 Status ReadXyzScan(const std::string& path, const fusion::v1::RecordedPose& pose,
                    std::vector<fusion::v1::RecordedCloud>* clouds);
 
 // OctoMap's binary scan graph (.graph, octomap::ScanGraph::writeBinary): one cloud per node,
 // its points in the node's frame, the node pose as t_world_sensor.
 Status ReadScanGraph(const std::string& path, std::vector<fusion::v1::RecordedCloud>* clouds);
+
+// The frame a file's points (and the pose given with them) are in. fusiond reads points in
+// the sensor's optical frame (x right, y down, z forward); scanners and robots use the body
+// frame of REP-103 (x forward, y left, z up).
+enum class PointFrame { kOptical, kBody };
+// "optical" or "body"; errors name the flag.
+Status ParsePointFrame(const std::string& flag, const std::string& text, PointFrame* frame);
+// Re-expresses a cloud whose points and t_world_sensor are in `frame` in the optical frame:
+// p_optical = R_optical_body p_body (x_o = -y_b, y_o = -z_b, z_o = x_b) and T_world_optical =
+// T_world_body T_body_optical, so every world point stays where it was. kOptical: unchanged.
+void ToOpticalFrame(PointFrame frame, fusion::v1::RecordedCloud* cloud);
 
 // Sets the identity of an imported cloud: sensor id, sequence number, stamp (seconds since the
 // epoch) and the receive time replay paces by (the same instant).

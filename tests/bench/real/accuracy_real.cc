@@ -1,0 +1,405 @@
+// accuracy_real: maps of the real recordings in ../shared/data made by core (one row per sensor
+// description) and by OctoMap's insertPointCloud at the same resolution, measured against the
+// points themselves (BENCHMARKS.md, "Accuracy on real data"). A benchmark program, not a test:
+//
+//   build/tests/accuracy_real [--data DIR] [--resolution M] [--stride N]
+//
+// TUM fr2/pioneer_slam2 (10 Kinect frames with ground-truth poses): every model maps the same
+// frames; the floor (world z ~ 0) is fitted robustly from the points, and the map is judged by
+// how many of its occupied voxels hold / lie within one voxel of a measured point, and by the
+// floor's thickness and offset over "clean" floor columns (map columns whose points all lie
+// within 4 cm of the fitted floor).
+#include <octomap/OcTree.h>
+
+#include <Eigen/Geometry>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include "../service/tum_map_bench_recording.h"
+#include "fusion/clients/importers.h"
+#include "fusion/core/beam_grid.h"
+#include "fusion/core/calibration.h"
+#include "fusion/core/world_map.h"
+#include "fusion/service/config.h"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using fusion::tum_map_bench::Frame;
+constexpr double kPi = 3.14159265358979323846;
+
+struct Options {
+  std::string data_dir;
+  double resolution_m = 0.02;
+  int stride = 4;
+};
+
+constexpr const char* kUsage =
+    "usage: accuracy_real [--data DIR] [--resolution M] [--stride N]\n"
+    "  --data        the real recordings (default ../shared/data beside the project)\n"
+    "  --resolution  map voxel edge in metres (default 0.02)\n"
+    "  --stride      TUM: every N-th pixel in both directions (default 4; 1 = every pixel)\n";
+
+bool ParseArgs(int argc, char** argv, Options* o) {
+  o->data_dir = (std::filesystem::path(FUSION_SOURCE_DIR) / ".." / "shared" / "data")
+                    .lexically_normal()
+                    .string();
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "--help" || flag == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    }
+    if (i + 1 >= argc) {
+      std::fprintf(stderr, "%s needs a value\n%s", flag.c_str(), kUsage);
+      return false;
+    }
+    const std::string value = argv[++i];
+    if (flag == "--data") {
+      o->data_dir = value;
+    } else if (flag == "--resolution") {
+      o->resolution_m = std::atof(value.c_str());
+    } else if (flag == "--stride") {
+      o->stride = std::atoi(value.c_str());
+    } else {
+      std::fprintf(stderr, "unknown flag %s\n%s", flag.c_str(), kUsage);
+      return false;
+    }
+  }
+  if (!(o->resolution_m >= 0.005 && o->resolution_m <= 1.0) || o->stride < 1 || o->stride > 16) {
+    std::fprintf(stderr, "--resolution must lie in [0.005, 1] m and --stride in 1..16\n");
+    return false;
+  }
+  return true;
+}
+
+double SecondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// ---- the maps ----------------------------------------------------------------------------------
+
+// A map's voxels by class at the finest depth (coarse leaves expanded).
+struct Classified {
+  std::vector<octomap::OcTreeKey> occupied;
+  double time_s = 0.0;
+};
+
+Classified ClassifyTree(const octomap::OcTree& tree, double occupied_threshold) {
+  Classified out;
+  const float l_occ = static_cast<float>(std::log(occupied_threshold / (1 - occupied_threshold)));
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    if (it->getLogOdds() < l_occ) continue;
+    const int side = 1 << (tree.getTreeDepth() - it.getDepth());
+    const octomap::OcTreeKey k0 = it.getIndexKey();
+    for (int x = 0; x < side; ++x)
+      for (int y = 0; y < side; ++y)
+        for (int z = 0; z < side; ++z) out.occupied.emplace_back(k0[0] + x, k0[1] + y, k0[2] + z);
+  }
+  return out;
+}
+
+std::optional<Classified> MapWithCore(const fusion::SensorSpec& spec, double resolution_m,
+                                      double occupied_threshold, const std::vector<Frame>& frames) {
+  fusion::WorldMapOptions options;
+  options.resolution_m = resolution_m;
+  options.render.resolution_m = resolution_m;
+  fusion::WorldMap map(options);
+  if (map.AddSensor("kinect", spec) != fusion::MapStatus::kOk) return std::nullopt;
+  const auto t0 = Clock::now();
+  for (const Frame& f : frames) {
+    if (map.Integrate("kinect", f.T_world_sensor, f.xyz.data(), f.xyz.size() / 3) !=
+            fusion::MapStatus::kOk ||
+        map.Render("kinect") != fusion::MapStatus::kOk) {
+      return std::nullopt;
+    }
+  }
+  const double time_s = SecondsSince(t0);
+  Classified c = ClassifyTree(map.tree(), occupied_threshold);
+  c.time_s = time_s;
+  return c;
+}
+
+Classified MapWithOctoMap(double resolution_m, double max_range_m,
+                          const std::vector<Frame>& frames) {
+  octomap::OcTree tree(resolution_m);
+  const auto t0 = Clock::now();
+  for (const Frame& f : frames) {
+    octomap::Pointcloud cloud;
+    for (std::size_t i = 0; i + 2 < f.xyz.size(); i += 3) {
+      const Eigen::Vector3d p(f.xyz[i], f.xyz[i + 1], f.xyz[i + 2]);
+      if (!p.allFinite()) continue;
+      const Eigen::Vector3d w = f.T_world_sensor * p;
+      cloud.push_back(static_cast<float>(w.x()), static_cast<float>(w.y()),
+                      static_cast<float>(w.z()));
+    }
+    const Eigen::Vector3d o = f.T_world_sensor.translation();
+    tree.insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), max_range_m);
+  }
+  const double time_s = SecondsSince(t0);
+  Classified c = ClassifyTree(tree, tree.getOccupancyThres());
+  c.time_s = time_s;
+  return c;
+}
+
+// ---- the points and what they say ----------------------------------------------------------------
+
+struct KeyHash {
+  std::size_t operator()(const octomap::OcTreeKey& k) const {
+    return (static_cast<std::size_t>(k[0]) << 32) ^ (static_cast<std::size_t>(k[1]) << 16) ^ k[2];
+  }
+};
+using KeySet = std::unordered_set<octomap::OcTreeKey, KeyHash>;
+
+struct Evidence {
+  octomap::OcTree grid;  // only for its key <-> coordinate conversions
+  KeySet point_voxels;   // voxels holding a measured point (within the sensor's range)
+  fusion::PlaneCoefficients floor = fusion::PlaneCoefficients(0, 0, 1, 0);
+  // Per map column (x, y keys): whether every point in it lies within 4 cm of the floor.
+  std::map<std::pair<int, int>, bool> columns;
+  explicit Evidence(double resolution_m) : grid(resolution_m) {}
+};
+
+double FloorDistance(const fusion::PlaneCoefficients& plane, const Eigen::Vector3d& p) {
+  return plane.head<3>().dot(p) + plane[3];
+}
+
+std::optional<Evidence> GatherEvidence(const std::vector<Frame>& frames, double resolution_m,
+                                       double max_range_m) {
+  Evidence e(resolution_m);
+  std::vector<Eigen::Vector3d> world, near_floor;
+  for (const Frame& f : frames) {
+    for (std::size_t i = 0; i + 2 < f.xyz.size(); i += 3) {
+      const Eigen::Vector3d p(f.xyz[i], f.xyz[i + 1], f.xyz[i + 2]);
+      if (!p.allFinite() || p.norm() > max_range_m) continue;
+      world.push_back(f.T_world_sensor * p);
+      if (std::abs(world.back().z()) < 0.15) near_floor.push_back(world.back());
+    }
+  }
+  fusion::PlaneFitOptions fit;
+  fit.inlier_distance_m = 0.02;
+  const fusion::PlaneFit floor = fusion::FitDominantPlane(near_floor, fit);
+  if (!floor.ok()) {
+    std::fprintf(stderr, "floor fit: %s\n", floor.error.c_str());
+    return std::nullopt;
+  }
+  e.floor = floor.plane;
+  if (e.floor[2] < 0) e.floor = -e.floor;  // normal up
+  for (const Eigen::Vector3d& w : world) {
+    const octomap::OcTreeKey k = e.grid.coordToKey(w.x(), w.y(), w.z());
+    e.point_voxels.insert(k);
+    const auto column = std::make_pair(int(k[0]), int(k[1]));
+    const bool clean = std::abs(FloorDistance(e.floor, w)) <= 0.04;
+    const auto [it, inserted] = e.columns.emplace(column, clean);
+    if (!inserted) it->second = it->second && clean;
+  }
+  const double tilt_deg = std::acos(std::min(1.0, e.floor[2])) * 180.0 / kPi;
+  std::printf("points: %zu within %.1f m, %zu voxels hold one; floor fitted from %zu points "
+              "near z = 0: %.4f x + %.4f y + %.4f z + %.4f = 0 (tilt %.2f deg, rms %.1f mm)\n",
+              world.size(), max_range_m, e.point_voxels.size(), near_floor.size(), e.floor[0],
+              e.floor[1], e.floor[2], e.floor[3], tilt_deg, 1000.0 * floor.rms_m);
+  return e;
+}
+
+struct Scores {
+  std::size_t occupied = 0;
+  double holding = 0.0, within_one = 0.0;  // shares of the occupied voxels
+  double floor_thickness_mm = 0.0, floor_offset_mm = 0.0, floor_coverage = 0.0;
+};
+
+bool NearAPoint(const KeySet& points, const octomap::OcTreeKey& k) {
+  for (int dx = -1; dx <= 1; ++dx)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dz = -1; dz <= 1; ++dz) {
+        if (points.count(octomap::OcTreeKey(k[0] + dx, k[1] + dy, k[2] + dz))) return true;
+      }
+  return false;
+}
+
+Scores Score(const Classified& map, const Evidence& e) {
+  Scores s;
+  s.occupied = map.occupied.size();
+  std::size_t holding = 0, near = 0;
+  // Per clean floor column: the occupied voxels within 0.3 m of the floor.
+  struct Column {
+    int voxels = 0;
+    double offset_sum_m = 0.0;
+  };
+  std::map<std::pair<int, int>, Column> floor;
+  for (const octomap::OcTreeKey& k : map.occupied) {
+    holding += e.point_voxels.count(k);
+    near += NearAPoint(e.point_voxels, k) ? 1 : 0;
+    const auto column = std::make_pair(int(k[0]), int(k[1]));
+    const auto it = e.columns.find(column);
+    if (it == e.columns.end() || !it->second) continue;
+    const octomap::point3d c = e.grid.keyToCoord(k);
+    const double d = FloorDistance(e.floor, Eigen::Vector3d(c.x(), c.y(), c.z()));
+    if (std::abs(d) > 0.3) continue;
+    Column& col = floor[column];
+    ++col.voxels;
+    col.offset_sum_m += d;
+  }
+  const double n = std::max<double>(1, s.occupied);
+  s.holding = holding / n;
+  s.within_one = near / n;
+  std::size_t clean = 0;
+  for (const auto& [key, is_clean] : e.columns) clean += is_clean ? 1 : 0;
+  double thickness = 0.0, offset = 0.0;
+  for (const auto& [key, col] : floor) {
+    thickness += col.voxels * e.grid.getResolution();
+    offset += col.offset_sum_m / col.voxels;
+  }
+  const double m = std::max<double>(1, floor.size());
+  s.floor_thickness_mm = 1000.0 * thickness / m;
+  s.floor_offset_mm = 1000.0 * offset / m;
+  s.floor_coverage = static_cast<double>(floor.size()) / std::max<std::size_t>(1, clean);
+  return s;
+}
+
+void PrintRow(const std::string& name, const Classified& map, const Scores& s) {
+  std::printf("| %s | %zu | %.1f %% | %.1f %% | %.1f | %+.1f | %.1f %% | %.2f |\n", name.c_str(),
+              s.occupied, 100.0 * s.holding, 100.0 * s.within_one, s.floor_thickness_mm,
+              s.floor_offset_mm, 100.0 * s.floor_coverage, map.time_s);
+}
+
+// ---- TUM -------------------------------------------------------------------------------------
+
+// The Kinect as typed by hand before calibration (e2e_tum_test.cc): sigma(r) = 0.0012 +
+// 0.0019 (r - 0.4)^2 m, no bias, eps 0.02, on a grid of the pixels (pinhole) or of angles.
+fusion::SensorSpec HandKinect(int stride, bool pinhole) {
+  fusion::SensorSpec s = *fusion::SensorPreset("kinect_v1");
+  s.q_mu = {0.0, 1.0, 0.0};
+  s.q_sigma = {0.0019, -2.0 * 0.0019 * 0.4, 0.0012 + 0.0019 * 0.16};
+  s.epsilon = 0.02;
+  fusion::PinholeIntrinsics k = *s.pinhole;
+  k.stride = stride;
+  fusion::SetPinhole(k, &s);
+  if (!pinhole) {
+    // The symmetric FOV that covers every pixel (principal point off centre), as before.
+    s.pinhole.reset();
+    s.fov_h_rad = 2.0 * std::atan(325.1 / 520.9) + 0.5 * kPi / 180.0;
+    s.fov_v_rad = 2.0 * std::atan(249.7 / 521.0) + 0.5 * kPi / 180.0;
+    s.azimuth_centre_rad = s.elevation_centre_rad = 0.0;
+  }
+  return s;
+}
+
+int RunTum(const Options& o) {
+  const std::string dir = o.data_dir + "/tum_fr2_pioneer_slam2";
+  if (!std::filesystem::exists(dir)) {
+    std::printf("TUM: %s is missing: skipped\n", dir.c_str());
+    return 0;
+  }
+  fusion::clients::TumOptions tum;
+  tum.directory = dir;
+  tum.stride = static_cast<std::uint32_t>(o.stride);
+  std::vector<Frame> frames;
+  const fusion::Status imported = fusion::clients::ImportTum(tum, [&](fusion::v1::RecordedCloud&& c) {
+    frames.push_back(fusion::tum_map_bench::FrameOf(c));
+    return fusion::Status::Ok();
+  });
+  if (!imported.ok()) {
+    std::fprintf(stderr, "TUM import: %s\n", imported.message().c_str());
+    return 1;
+  }
+  const fusion::SensorSpec preset = HandKinect(o.stride, true);
+  const auto evidence = GatherEvidence(frames, o.resolution_m, preset.r_max_m);
+  if (!evidence) return 1;
+  const double occupied_threshold =
+      fusion::service::DefaultConfig().map().occupied_threshold();
+  std::printf("\n## TUM fr2/pioneer_slam2: %zu frames, every %d-th pixel, %.3f m voxels\n\n",
+              frames.size(), o.stride, o.resolution_m);
+  std::printf("| map | occupied voxels | holding a point | within one voxel of a point | "
+              "clean-floor thickness (mm) | floor offset (mm) | clean floor columns covered | "
+              "time (s) |\n|---|---|---|---|---|---|---|---|\n");
+  fusion::SensorSpec fitted = *fusion::SensorPreset("kinect_v1");
+  fusion::PinholeIntrinsics k = *fitted.pinhole;
+  k.stride = o.stride;
+  fusion::SetPinhole(k, &fitted);
+  const std::pair<std::string, fusion::SensorSpec> rows[] = {
+      {"ours, hand-typed model, angular grid", HandKinect(o.stride, false)},
+      {"ours, hand-typed model, pinhole grid", HandKinect(o.stride, true)},
+      {"ours, kinect_v1 preset (fitted model, pinhole grid)", fitted},
+  };
+  for (const auto& [name, spec] : rows) {
+    const auto map = MapWithCore(spec, o.resolution_m, occupied_threshold, frames);
+    if (!map) {
+      std::fprintf(stderr, "%s: the map refused the sensor or a frame\n", name.c_str());
+      return 1;
+    }
+    PrintRow(name, *map, Score(*map, *evidence));
+    std::fflush(stdout);
+  }
+  const Classified octomap = MapWithOctoMap(o.resolution_m, preset.r_max_m, frames);
+  PrintRow("OctoMap insertPointCloud", octomap, Score(octomap, *evidence));
+  return 0;
+}
+
+// ---- the laser scan's beam grid ------------------------------------------------------------
+
+// OctoMap's sample scan (body frame, -91..91 x -7..32 degrees) held by a grid symmetric about
+// the optical axis at 0.1-degree beams (what it needed before asymmetric grids) and by the
+// laser_3d preset: beams and memory after integrating the scan, at the service's beam cell.
+int RunScanGrid(const Options& o) {
+  const std::string path = o.data_dir + "/octomap_laser_scan/scan.dat.bz2";
+  if (!std::filesystem::exists(path)) {
+    std::printf("laser scan: %s is missing: skipped\n", path.c_str());
+    return 0;
+  }
+  fusion::v1::RecordedPose origin;
+  origin.set_qw(1.0);
+  std::vector<fusion::v1::RecordedCloud> clouds;
+  if (const fusion::Status s = fusion::clients::ReadXyzScan(path, origin, &clouds); !s.ok()) {
+    std::fprintf(stderr, "laser scan: %s\n", s.message().c_str());
+    return 1;
+  }
+  fusion::clients::ToOpticalFrame(fusion::clients::PointFrame::kBody, &clouds.at(0));
+  const Frame scan = fusion::tum_map_bench::FrameOf(clouds[0]);
+  fusion::BeamGridOptions options = fusion::WorldMapOptions().beam_grid;
+  options.cell_size_m = fusion::service::DefaultConfig().map().beam_cell_size_m();
+  fusion::SensorSpec symmetric = *fusion::SensorPreset("laser_3d");
+  fusion::SetAngularLimits(-92.0 * kPi / 180, 92.0 * kPi / 180, -32.25 * kPi / 180,
+                           32.25 * kPi / 180, &symmetric);
+  symmetric.cols = 1840;
+  symmetric.rows = 645;
+  std::printf("\n## OctoMap's laser scan: %zu points, beam cells of %.3f m\n\n| grid | beams | "
+              "readings in the grid | beam grid memory (MB) |\n|---|---|---|---|\n",
+              scan.xyz.size() / 3, options.cell_size_m);
+  const auto coarser = [](int cols, int rows) {
+    fusion::SensorSpec s = *fusion::SensorPreset("laser_3d");
+    s.cols = cols;
+    s.rows = rows;
+    return s;
+  };
+  const std::pair<std::string, fusion::SensorSpec> grids[] = {
+      {"symmetric, 184 x 64.5 degrees at 0.1 degree", symmetric},
+      {"asymmetric 184 x 41 degrees at 0.25 degree", coarser(736, 164)},
+      {"laser_3d: asymmetric 184 x 41 degrees at 0.5 degree", *fusion::SensorPreset("laser_3d")},
+  };
+  for (const auto& [name, spec] : grids) {
+    fusion::BeamGrid grid(spec, options);
+    const fusion::IntegrationStats stats = grid.Integrate(scan.xyz.data(), scan.xyz.size() / 3);
+    std::printf("| %s | %zu | %zu | %.1f |\n", name.c_str(), grid.beam_count(), stats.updated,
+                static_cast<double>(grid.MemoryBytes()) / 1e6);
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  if (!ParseArgs(argc, argv, &o)) return 2;
+  std::printf("accuracy_real: data %s\n", o.data_dir.c_str());
+  if (const int tum = RunTum(o); tum != 0) return tum;
+  return RunScanGrid(o);
+}
