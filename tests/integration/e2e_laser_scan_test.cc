@@ -78,18 +78,19 @@ class E2eLaserScanTest : public E2eService {
 
   // The scan file (scanner frame) imported with --frame body and the scanner's pose into
   // `recording`; *world: the recording's points in the world frame.
+  // *sensor_block: the `sensors { ... }` block the importer prints for the scan.
   void ImportTheScan(const std::vector<Eigen::Vector3d>& scan, const std::string& recording,
-                     std::vector<Eigen::Vector3d>* world) {
+                     std::vector<Eigen::Vector3d>* world, std::string* sensor_block) {
     const Eigen::Vector3d& t = kScannerInWorld;
     std::ostringstream pose;
     pose.precision(17);
     pose << t.x() << ',' << t.y() << ',' << t.z();
-    std::string out;
     ASSERT_EQ(RunTool({"fusion-import", "scan", kScan, "--frame", "body", "--pose", pose.str(),
-                       "--sensor-id", "scanner", "-o", recording},
-                      &out),
+                       "--sensor-id", "scanner", "--print-sensor", "-o", recording},
+                      sensor_block),
               0)
-        << out;
+        << *sensor_block;
+    ASSERT_NE(sensor_block->find("preset: \"laser_3d\""), std::string::npos) << *sensor_block;
     const auto clouds = ReadRecording(recording);
     ASSERT_EQ(clouds.size(), 1u);
     const auto& q = clouds[0].t_world_sensor();
@@ -105,14 +106,14 @@ class E2eLaserScanTest : public E2eService {
     }
   }
 
-  // fusiond: one 184 x 66 degree sensor, 0.5 degree beams, 0.3..30 m, 3 cm noise; 0.15 m map.
-  // The recording replayed into it; every point used.
-  void ReplayIntoFusiond(const std::string& recording, std::size_t point_count) {
+  // fusiond configured with the block the importer printed (the laser_3d preset over the
+  // scan's own field of view and beams), a 0.15 m map. The recording replayed into it; every
+  // point used: import, configure and replay without describing the sensor by hand.
+  void ReplayIntoFusiond(const std::string& recording, const std::string& sensor_block,
+                         std::size_t point_count) {
     std::ostringstream config;
     config << "log_level: \"warn\"\n"
-           << "sensors { id: \"scanner\" model: \"paper3d\" r_min_m: 0.3 r_max_m: 30.0\n"
-           << "  fov_h_deg: 184 fov_v_deg: 66 cols: 368 rows: 132 epsilon: 0.02\n"
-           << "  q_mu { a2: 0 a1: 1 a0: 0 } q_sigma { a2: 0 a1: 0 a0: 0.03 } }\n"
+           << sensor_block
            << "map { resolution_m: 0.15 render_interval_ms: 100 beam_cell_size_m: 0.02 }\n"
            << "ingest { reliability: \"reliable\" }\n";
     ASSERT_NO_FATAL_FAILURE(StartFusiond(config.str()));
@@ -158,8 +159,9 @@ TEST_F(E2eLaserScanTest, PointsAreOccupiedAndRaysFree) {
   ASSERT_EQ(scan.size(), 88206u) << "bzip2 -dc " << kScan;
   const std::string recording = dir_ + "/scan.frec";
   std::vector<Eigen::Vector3d> world;
-  ASSERT_NO_FATAL_FAILURE(ImportTheScan(scan, recording, &world));
-  ASSERT_NO_FATAL_FAILURE(ReplayIntoFusiond(recording, scan.size()));
+  std::string sensor_block;
+  ASSERT_NO_FATAL_FAILURE(ImportTheScan(scan, recording, &world, &sensor_block));
+  ASSERT_NO_FATAL_FAILURE(ReplayIntoFusiond(recording, sensor_block, scan.size()));
   ASSERT_NO_FATAL_FAILURE(ExpectOccupiedAtThePointsFreeOnTheRays(scan, world));
   // Behind the scanner (x < -0.5 in the scanner frame) nothing was seen.
   const Eigen::Vector3d& t = kScannerInWorld;

@@ -18,6 +18,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <unordered_map>
@@ -37,17 +38,22 @@ using Clock = std::chrono::steady_clock;
 using fusion::tum_map_bench::Frame;
 constexpr double kPi = 3.14159265358979323846;
 
+// The beam prior's reference length of core's maps (--beam-prior).
+double g_beam_prior_m = fusion::WorldMapOptions::kDefaultBeamPriorLengthM;
+
 struct Options {
   std::string data_dir;
   double resolution_m = 0.02;
+  double scan_resolution_m = 0.05;
   int stride = 4;
 };
 
 constexpr const char* kUsage =
-    "usage: accuracy_real [--data DIR] [--resolution M] [--stride N]\n"
+    "usage: accuracy_real [--data DIR] [--resolution M] [--stride N] [--scan-resolution M]\n"
     "  --data        the real recordings (default ../shared/data beside the project)\n"
     "  --resolution  map voxel edge in metres (default 0.02)\n"
-    "  --stride      TUM: every N-th pixel in both directions (default 4; 1 = every pixel)\n";
+    "  --stride      TUM: every N-th pixel in both directions (default 4; 1 = every pixel)\n"
+    "  --scan-resolution  the laser scan's map voxel edge in metres (default 0.05)\n";
 
 bool ParseArgs(int argc, char** argv, Options* o) {
   o->data_dir = (std::filesystem::path(FUSION_SOURCE_DIR) / ".." / "shared" / "data")
@@ -68,6 +74,10 @@ bool ParseArgs(int argc, char** argv, Options* o) {
       o->data_dir = value;
     } else if (flag == "--resolution") {
       o->resolution_m = std::atof(value.c_str());
+    } else if (flag == "--beam-prior") {
+      g_beam_prior_m = std::atof(value.c_str());
+    } else if (flag == "--scan-resolution") {
+      o->scan_resolution_m = std::atof(value.c_str());
     } else if (flag == "--stride") {
       o->stride = std::atoi(value.c_str());
     } else {
@@ -75,8 +85,11 @@ bool ParseArgs(int argc, char** argv, Options* o) {
       return false;
     }
   }
-  if (!(o->resolution_m >= 0.005 && o->resolution_m <= 1.0) || o->stride < 1 || o->stride > 16) {
-    std::fprintf(stderr, "--resolution must lie in [0.005, 1] m and --stride in 1..16\n");
+  if (!(o->resolution_m >= 0.005 && o->resolution_m <= 1.0) ||
+      !(o->scan_resolution_m >= 0.01 && o->scan_resolution_m <= 1.0) || o->stride < 1 ||
+      o->stride > 16) {
+    std::fprintf(stderr, "--resolution must lie in [0.005, 1] m, --scan-resolution in [0.01, 1] m "
+                 "and --stride in 1..16\n");
     return false;
   }
   return true;
@@ -88,50 +101,65 @@ double SecondsSince(Clock::time_point t0) {
 
 // ---- the maps ----------------------------------------------------------------------------------
 
-// A map's voxels by class at the finest depth (coarse leaves expanded).
-struct Classified {
-  std::vector<octomap::OcTreeKey> occupied;
+// A map as made, and how long it took.
+struct Built {
+  std::unique_ptr<octomap::OcTree> tree;
   double time_s = 0.0;
 };
 
-Classified ClassifyTree(const octomap::OcTree& tree, double occupied_threshold) {
-  Classified out;
-  const float l_occ = static_cast<float>(std::log(occupied_threshold / (1 - occupied_threshold)));
+// Calls f(key, log_odds) for every voxel of the finest depth (coarse leaves expanded).
+template <typename F>
+void ForEachVoxel(const octomap::OcTree& tree, F&& f) {
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-    if (it->getLogOdds() < l_occ) continue;
     const int side = 1 << (tree.getTreeDepth() - it.getDepth());
     const octomap::OcTreeKey k0 = it.getIndexKey();
+    const float l = it->getLogOdds();
     for (int x = 0; x < side; ++x)
       for (int y = 0; y < side; ++y)
-        for (int z = 0; z < side; ++z) out.occupied.emplace_back(k0[0] + x, k0[1] + y, k0[2] + z);
+        for (int z = 0; z < side; ++z) f(octomap::OcTreeKey(k0[0] + x, k0[1] + y, k0[2] + z), l);
   }
+}
+
+float LogOdds(double p) { return static_cast<float>(std::log(p / (1.0 - p))); }
+
+// A map's occupied voxels at the finest depth.
+std::vector<octomap::OcTreeKey> OccupiedVoxels(const octomap::OcTree& tree,
+                                               double occupied_threshold) {
+  std::vector<octomap::OcTreeKey> out;
+  const float l_occ = LogOdds(occupied_threshold);
+  ForEachVoxel(tree, [&](const octomap::OcTreeKey& k, float l) {
+    if (l >= l_occ) out.push_back(k);
+  });
   return out;
 }
 
-std::optional<Classified> MapWithCore(const fusion::SensorSpec& spec, double resolution_m,
-                                      double occupied_threshold, const std::vector<Frame>& frames) {
+std::optional<Built> MapWithCore(const fusion::SensorSpec& spec, double resolution_m,
+                                 const std::vector<Frame>& frames) {
   fusion::WorldMapOptions options;
+  options.beam_prior_length_m = g_beam_prior_m;
   options.resolution_m = resolution_m;
   options.render.resolution_m = resolution_m;
   fusion::WorldMap map(options);
-  if (map.AddSensor("kinect", spec) != fusion::MapStatus::kOk) return std::nullopt;
+  if (map.AddSensor(spec.name, spec) != fusion::MapStatus::kOk) return std::nullopt;
   const auto t0 = Clock::now();
   for (const Frame& f : frames) {
-    if (map.Integrate("kinect", f.T_world_sensor, f.xyz.data(), f.xyz.size() / 3) !=
+    if (map.Integrate(spec.name, f.T_world_sensor, f.xyz.data(), f.xyz.size() / 3) !=
             fusion::MapStatus::kOk ||
-        map.Render("kinect") != fusion::MapStatus::kOk) {
+        map.Render(spec.name) != fusion::MapStatus::kOk) {
       return std::nullopt;
     }
   }
-  const double time_s = SecondsSince(t0);
-  Classified c = ClassifyTree(map.tree(), occupied_threshold);
-  c.time_s = time_s;
-  return c;
+  Built b;
+  b.time_s = SecondsSince(t0);
+  b.tree = std::make_unique<octomap::OcTree>(map.tree());
+  return b;
 }
 
-Classified MapWithOctoMap(double resolution_m, double max_range_m,
-                          const std::vector<Frame>& frames) {
-  octomap::OcTree tree(resolution_m);
+// OctoMap's insertPointCloud of the same points at the same resolution (max_range_m < 0: no
+// limit), OctoMap's default sensor model.
+Built MapWithOctoMap(double resolution_m, double max_range_m, const std::vector<Frame>& frames) {
+  Built b;
+  b.tree = std::make_unique<octomap::OcTree>(resolution_m);
   const auto t0 = Clock::now();
   for (const Frame& f : frames) {
     octomap::Pointcloud cloud;
@@ -143,12 +171,10 @@ Classified MapWithOctoMap(double resolution_m, double max_range_m,
                       static_cast<float>(w.z()));
     }
     const Eigen::Vector3d o = f.T_world_sensor.translation();
-    tree.insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), max_range_m);
+    b.tree->insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), max_range_m);
   }
-  const double time_s = SecondsSince(t0);
-  Classified c = ClassifyTree(tree, tree.getOccupancyThres());
-  c.time_s = time_s;
-  return c;
+  b.time_s = SecondsSince(t0);
+  return b;
 }
 
 // ---- the points and what they say ----------------------------------------------------------------
@@ -225,9 +251,9 @@ bool NearAPoint(const KeySet& points, const octomap::OcTreeKey& k) {
   return false;
 }
 
-Scores Score(const Classified& map, const Evidence& e) {
+Scores Score(const std::vector<octomap::OcTreeKey>& occupied, const Evidence& e) {
   Scores s;
-  s.occupied = map.occupied.size();
+  s.occupied = occupied.size();
   std::size_t holding = 0, near = 0;
   // Per clean floor column: the occupied voxels within 0.3 m of the floor.
   struct Column {
@@ -235,7 +261,7 @@ Scores Score(const Classified& map, const Evidence& e) {
     double offset_sum_m = 0.0;
   };
   std::map<std::pair<int, int>, Column> floor;
-  for (const octomap::OcTreeKey& k : map.occupied) {
+  for (const octomap::OcTreeKey& k : occupied) {
     holding += e.point_voxels.count(k);
     near += NearAPoint(e.point_voxels, k) ? 1 : 0;
     const auto column = std::make_pair(int(k[0]), int(k[1]));
@@ -265,10 +291,10 @@ Scores Score(const Classified& map, const Evidence& e) {
   return s;
 }
 
-void PrintRow(const std::string& name, const Classified& map, const Scores& s) {
+void PrintRow(const std::string& name, double time_s, const Scores& s) {
   std::printf("| %s | %zu | %.1f %% | %.1f %% | %.1f | %+.1f | %.1f %% | %.2f |\n", name.c_str(),
               s.occupied, 100.0 * s.holding, 100.0 * s.within_one, s.floor_thickness_mm,
-              s.floor_offset_mm, 100.0 * s.floor_coverage, map.time_s);
+              s.floor_offset_mm, 100.0 * s.floor_coverage, time_s);
 }
 
 // ---- TUM -------------------------------------------------------------------------------------
@@ -331,17 +357,93 @@ int RunTum(const Options& o) {
       {"ours, kinect_v1 preset (fitted model, pinhole grid)", fitted},
   };
   for (const auto& [name, spec] : rows) {
-    const auto map = MapWithCore(spec, o.resolution_m, occupied_threshold, frames);
+    const auto map = MapWithCore(spec, o.resolution_m, frames);
     if (!map) {
       std::fprintf(stderr, "%s: the map refused the sensor or a frame\n", name.c_str());
       return 1;
     }
-    PrintRow(name, *map, Score(*map, *evidence));
+    PrintRow(name, map->time_s, Score(OccupiedVoxels(*map->tree, occupied_threshold), *evidence));
     std::fflush(stdout);
   }
-  const Classified octomap = MapWithOctoMap(o.resolution_m, preset.r_max_m, frames);
-  PrintRow("OctoMap insertPointCloud", octomap, Score(octomap, *evidence));
+  const Built octomap = MapWithOctoMap(o.resolution_m, preset.r_max_m, frames);
+  PrintRow("OctoMap insertPointCloud", octomap.time_s,
+           Score(OccupiedVoxels(*octomap.tree, octomap.tree->getOccupancyThres()), *evidence));
   return 0;
+}
+
+// ---- agreement with OctoMap by class and range ------------------------------------------------
+
+struct Band {
+  double lo_m = 0.0, hi_m = 0.0;
+  std::size_t octo_occupied = 0, occupied_near = 0;           // ours occupied within one voxel
+  std::size_t octo_free = 0, free_free = 0, free_unknown = 0;  // ours free / unknown there
+};
+
+struct Classes {
+  float occupied_log_odds = 0.0f, free_log_odds = 0.0f;
+  [[nodiscard]] int Of(const octomap::OcTree& tree, const octomap::OcTreeKey& k) const {
+    const octomap::OcTreeNode* n = tree.search(k);
+    if (n == nullptr) return 0;  // unknown
+    if (n->getLogOdds() >= occupied_log_odds) return 1;
+    return n->getLogOdds() <= free_log_odds ? -1 : 0;
+  }
+};
+
+// OctoMap's voxels by class and by the range of their centre from `origin`: how ours classifies
+// them (occupied: at the voxel or a neighbour).
+std::vector<Band> CompareByBand(const octomap::OcTree& ours, const Classes& classes,
+                                const octomap::OcTree& octo, const Eigen::Vector3d& origin,
+                                const std::vector<double>& edges_m) {
+  std::vector<Band> bands;
+  for (std::size_t i = 0; i + 1 < edges_m.size(); ++i) bands.push_back({edges_m[i], edges_m[i + 1]});
+  const float octo_occupied = octo.getOccupancyThresLog();
+  ForEachVoxel(octo, [&](const octomap::OcTreeKey& k, float l) {
+    const octomap::point3d c = octo.keyToCoord(k);
+    const double r = (Eigen::Vector3d(c.x(), c.y(), c.z()) - origin).norm();
+    Band* band = nullptr;
+    for (Band& b : bands) {
+      if (r >= b.lo_m && r < b.hi_m) band = &b;
+    }
+    if (band == nullptr) return;
+    if (l >= octo_occupied) {
+      ++band->octo_occupied;
+      bool near = false;
+      for (int dx = -1; dx <= 1 && !near; ++dx)
+        for (int dy = -1; dy <= 1 && !near; ++dy)
+          for (int dz = -1; dz <= 1 && !near; ++dz) {
+            near = classes.Of(ours, octomap::OcTreeKey(k[0] + dx, k[1] + dy, k[2] + dz)) == 1;
+          }
+      band->occupied_near += near ? 1 : 0;
+    } else {
+      ++band->octo_free;
+      const int mine = classes.Of(ours, k);
+      band->free_free += mine == -1 ? 1 : 0;
+      band->free_unknown += mine == 0 ? 1 : 0;
+    }
+  });
+  return bands;
+}
+
+void PrintBands(const std::vector<Band>& bands) {
+  std::printf("\n| range band (m) | OctoMap occupied | of them occupied in ours (within one voxel) "
+              "| OctoMap free | of them free in ours | unknown in ours |\n"
+              "|---|---|---|---|---|---|\n");
+  Band all;
+  for (const Band& b : bands) {
+    const auto share = [](std::size_t a, std::size_t n) { return n ? 100.0 * a / n : 0.0; };
+    std::printf("| %.0f-%.0f | %zu | %.1f %% | %zu | %.1f %% | %.1f %% |\n", b.lo_m, b.hi_m,
+                b.octo_occupied, share(b.occupied_near, b.octo_occupied), b.octo_free,
+                share(b.free_free, b.octo_free), share(b.free_unknown, b.octo_free));
+    all.octo_occupied += b.octo_occupied;
+    all.occupied_near += b.occupied_near;
+    all.octo_free += b.octo_free;
+    all.free_free += b.free_free;
+    all.free_unknown += b.free_unknown;
+  }
+  std::printf("| all | %zu | %.1f %% | %zu | %.1f %% | %.1f %% |\n", all.octo_occupied,
+              100.0 * all.occupied_near / std::max<std::size_t>(1, all.octo_occupied),
+              all.octo_free, 100.0 * all.free_free / std::max<std::size_t>(1, all.octo_free),
+              100.0 * all.free_unknown / std::max<std::size_t>(1, all.octo_free));
 }
 
 // ---- the laser scan's beam grid ------------------------------------------------------------
@@ -391,6 +493,22 @@ int RunScanGrid(const Options& o) {
     std::printf("| %s | %zu | %zu | %.1f |\n", name.c_str(), grid.beam_count(), stats.updated,
                 static_cast<double>(grid.MemoryBytes()) / 1e6);
   }
+  // The map: ours with the laser_3d preset against OctoMap's, every return (no max range).
+  const std::vector<Frame> frames = {scan};
+  const auto ours = MapWithCore(*fusion::SensorPreset("laser_3d"), o.scan_resolution_m, frames);
+  if (!ours) {
+    std::fprintf(stderr, "laser scan: the map refused the sensor or the scan\n");
+    return 1;
+  }
+  const Built octomap = MapWithOctoMap(o.scan_resolution_m, -1.0, frames);
+  const auto& config = fusion::service::DefaultConfig().map();
+  const Classes classes{LogOdds(config.occupied_threshold()), LogOdds(config.free_threshold())};
+  std::printf("\nmaps at %.3f m: ours (laser_3d) %zu occupied voxels in %.2f s, OctoMap %zu in "
+              "%.2f s\n",
+              o.scan_resolution_m, OccupiedVoxels(*ours->tree, config.occupied_threshold()).size(),
+              ours->time_s, OccupiedVoxels(*octomap.tree, 0.5).size(), octomap.time_s);
+  PrintBands(CompareByBand(*ours->tree, classes, *octomap.tree, scan.T_world_sensor.translation(),
+                           {0.0, 2.0, 5.0, 10.0, 20.0, 30.0}));
   return 0;
 }
 
