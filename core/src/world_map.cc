@@ -75,8 +75,8 @@ bool WorldMapOptions::IsValid(std::string* why) const {
   if (!(occupancy_threshold > 0.0 && occupancy_threshold < 1.0)) {
     return fail("occupancy_threshold must lie in (0, 1)");
   }
-  if (!(beam_prior_length_m > 0.0 && std::isfinite(beam_prior_length_m))) {
-    return fail("beam_prior_length_m must be finite and > 0");
+  if (!(beam_prior_length_m > 0.0 && beam_prior_length_m <= 1000.0)) {
+    return fail("beam_prior_length_m must lie in (0, 1000] m");
   }
   if (!SensorGridOptions(*this).IsValid(&out)) {
     out = "beam_grid." + out;

@@ -201,6 +201,7 @@ fusion::v1::ServiceConfig DefaultConfig() {
   map->set_change_detection_min_mass(BeamGridOptions::kDefaultChangeMinMass);
   map->set_history_clamping_max(WorldMapOptions::kDefaultHistoryClampingMax);
   map->set_forget_half_life_s(WorldMapOptions::kDefaultForgetHalfLifeS);
+  map->set_beam_prior_length_m(WorldMapOptions::kDefaultBeamPriorLengthM);
   auto* ingest = config.mutable_ingest();
   ingest->set_reliability("best_effort");
   ingest->set_max_points(4'000'000);

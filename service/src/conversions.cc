@@ -250,6 +250,7 @@ StatusOr<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig&
   options.beam_grid.change_min_mass = c.change_detection_min_mass();
   options.history_clamping_max_probability = c.history_clamping_max();
   options.forget_half_life_s = c.forget_half_life_s();
+  options.beam_prior_length_m = c.beam_prior_length_m();
   options.render.resolution_m = options.resolution_m;
   options.occupancy_threshold = c.occupied_threshold();
   // 0: each sensor's full range (core's default); anything else, negative and NaN included,

@@ -133,6 +133,8 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
       {"map { history_clamping_max: 1.5 }", "map.history_clamping_max"},
       {"map { history_clamping_max: 0.0005 }", "map.history_clamping_max"},
       {"map { forget_half_life_s: -1 }", "map.forget_half_life_s"},
+      {"map { beam_prior_length_m: -1 }", "map.beam_prior_length_m"},
+      {"map { beam_prior_length_m: 5000 }", "map.beam_prior_length_m"},
       {"metrics { listen_address: \"localhost:9464\" }", "metrics.listen_address"},
       {"metrics { listen_address: \"127.0.0.1\" }", "metrics.listen_address"},
       {"metrics { listen_address: \"127.0.0.1:65536\" }", "metrics.listen_address"},
