@@ -1,0 +1,60 @@
+// A single return far out (a laser's at 20 m) marks its surface and clears its beam when the
+// beam prior does not already expect a surface every metre (map.beam_prior_length_m;
+// BENCHMARKS.md, "The laser scan's beam grid").
+#include <gtest/gtest.h>
+
+#include <optional>
+#include <vector>
+
+#include "fusion/core/world_map.h"
+
+namespace fusion {
+namespace {
+
+// The map's occupancy at each of `at_m` on the optical axis after one reading at range_m.
+std::vector<std::optional<double>> OccupancyAlongTheAxis(double beam_prior_length_m,
+                                                         double range_m,
+                                                         const std::vector<double>& at_m) {
+  WorldMapOptions options;
+  options.resolution_m = 0.05;
+  options.render.resolution_m = 0.05;
+  options.beam_prior_length_m = beam_prior_length_m;
+  WorldMap map(options);
+  EXPECT_EQ(map.AddSensor("laser", *SensorPreset("laser_3d")), MapStatus::kOk);
+  const float point[3] = {0.0f, 0.0f, static_cast<float>(range_m)};
+  EXPECT_EQ(map.Integrate("laser", Eigen::Isometry3d::Identity(), point, 1), MapStatus::kOk);
+  EXPECT_EQ(map.Render("laser"), MapStatus::kOk);
+  std::vector<std::optional<double>> out;
+  for (const double z : at_m) out.push_back(map.Occupancy(Eigen::Vector3d(0.0, 0.0, z)));
+  return out;
+}
+
+TEST(FarReturnTest, OneReadingAtTwentyMetresMarksAndClears) {
+  const std::vector<double> at = {20.0, 21.0, 0.5, 1.0, 5.0, 10.0, 15.0, 19.5};
+  const auto p = OccupancyAlongTheAxis(30.0, 20.0, at);  // prior: the laser's range
+  ASSERT_TRUE(p[0].has_value());
+  EXPECT_GE(*p[0], 0.9);
+  // Behind the surface nothing is claimed free.
+  EXPECT_TRUE(!p[1].has_value() || *p[1] > 0.45);
+  for (std::size_t i = 2; i < at.size(); ++i) {
+    ASSERT_TRUE(p[i].has_value()) << at[i];
+    EXPECT_LE(*p[i], 0.1) << "free at " << at[i] << " m";
+  }
+}
+
+// With the default 1 m prior a 20 m return is mostly explained as an outlier of a nearer
+// surface: it marks its surface but leaves the first metres of its beam unknown (issue 11); a
+// return at 5 m clears its beam.
+TEST(FarReturnTest, TheDefaultPriorLeavesTheNearBeamUnknown) {
+  const double prior_m = WorldMapOptions::kDefaultBeamPriorLengthM;
+  const auto far = OccupancyAlongTheAxis(prior_m, 20.0, {20.0, 2.0});
+  ASSERT_TRUE(far[0].has_value() && far[1].has_value());
+  EXPECT_GE(*far[0], 0.9);
+  EXPECT_GT(*far[1], 0.45);
+  const auto near = OccupancyAlongTheAxis(prior_m, 5.0, {2.0});
+  ASSERT_TRUE(near[0].has_value());
+  EXPECT_LE(*near[0], 0.1);
+}
+
+}  // namespace
+}  // namespace fusion
