@@ -3,7 +3,11 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <stdexcept>
+#include <tuple>
+#include <unordered_map>
 
 namespace fusion {
 namespace {
@@ -116,6 +120,41 @@ std::vector<WeightedPoint> CollectVoters(const octomap::OcTree& tree, const Houg
   return points;
 }
 
+// The voters merged into cubes of `cell` metres: one voter per cube at the weighted centroid
+// of its voxels, carrying their summed weight. A plane's voxels have their centroid on the
+// plane, so the peaks stay where they were while the votes cost a fraction (a surface's voxels
+// shrink by the square of the merge factor).
+std::vector<WeightedPoint> MergedVoters(const std::vector<WeightedPoint>& points, double cell,
+                                        Poller* poller) {
+  struct Sum {
+    Eigen::Vector3d wp = Eigen::Vector3d::Zero();
+    double w = 0.0;
+  };
+  std::unordered_map<std::uint64_t, Sum> cubes;
+  cubes.reserve(points.size() / 4 + 1);
+  const double inv = 1.0 / cell;
+  for (const auto& wp : points) {
+    if (poller->Tick(4)) return {};
+    // 21 bits per axis: +-1e6 cubes around the origin (km at metre cubes).
+    const auto axis = [inv](double v) {
+      return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(v * inv)) +
+                                        (std::int64_t{1} << 20)) &
+             ((std::uint64_t{1} << 21) - 1);
+    };
+    Sum& sum = cubes[(axis(wp.p.x()) << 42) | (axis(wp.p.y()) << 21) | axis(wp.p.z())];
+    sum.wp += wp.w * wp.p;
+    sum.w += wp.w;
+  }
+  std::vector<WeightedPoint> merged;
+  merged.reserve(cubes.size());
+  for (const auto& [key, sum] : cubes) merged.push_back({sum.wp / sum.w, sum.w, false});
+  // The hash map's order is not the input's: sort so that the search is deterministic.
+  std::sort(merged.begin(), merged.end(), [](const WeightedPoint& a, const WeightedPoint& b) {
+    return std::tie(a.p.x(), a.p.y(), a.p.z()) < std::tie(b.p.x(), b.p.y(), b.p.z());
+  });
+  return merged;
+}
+
 // Votes: cells[normal][d]. Each voxel votes once per normal with d = n . p >= 0 (the opposite
 // normal takes d < 0).
 struct Accumulator {
@@ -178,8 +217,9 @@ bool IsLocalMax(const Accumulator& acc, int t, int f, int b, float v) {
   return true;
 }
 
-// The strongest local maxima, strongest first; at most kMaxPeaks are kept.
-std::vector<Peak> FindPeaks(const Accumulator& acc, Poller* poller) {
+// The strongest local maxima with at least min_votes, strongest first; at most kMaxPeaks are
+// kept.
+std::vector<Peak> FindPeaks(const Accumulator& acc, float min_votes, Poller* poller) {
   constexpr std::size_t kMaxPeaks = 16384;
   const auto stronger = [](const Peak& a, const Peak& b) { return a.votes > b.votes; };
   std::vector<Peak> peaks;
@@ -194,7 +234,7 @@ std::vector<Peak> FindPeaks(const Accumulator& acc, Poller* poller) {
       const std::size_t k = std::size_t(t) * acc.n_phi + f;
       for (int b = 0; b < acc.n_d; ++b) {
         const float v = acc.at(k, b);
-        if (v <= 0.0f || !IsLocalMax(acc, t, f, b, v)) continue;
+        if (v < min_votes || v <= 0.0f || !IsLocalMax(acc, t, f, b, v)) continue;
         peaks.push_back({v, acc.normals[k].cast<double>(), (b + 0.5) * acc.d_bin_m});
         if (peaks.size() >= 2 * kMaxPeaks) trim();
       }
@@ -205,29 +245,89 @@ std::vector<Peak> FindPeaks(const Accumulator& acc, Poller* poller) {
   return peaks;
 }
 
+// Whether a peak's plane, its normal within the angle of an accepted plane's, passes through
+// (or within `distance` of) the box of that plane's support: a thick or slightly tilted copy
+// of the same surface, which would refine into a strip of it.
+bool Crosses(const Peak& peak, const Plane& a, double cos_angle, double distance) {
+  if (std::abs(peak.normal.dot(a.normal)) <= cos_angle) return false;
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Eigen::Vector3d c = a.extent.corner(static_cast<Eigen::AlignedBox3d::CornerType>(corner));
+    const double r = peak.normal.dot(c) - peak.d;
+    lo = std::min(lo, r);
+    hi = std::max(hi, r);
+  }
+  return lo <= distance && hi >= -distance;
+}
+
+// Whether `plane` is a stronger accepted plane seen again: a normal within the angle and most
+// (by weight) of the voxels within `band` of it, claimed or not, within `distance` of that
+// plane. A surface thickened by pose error or noise supports planes tilted a degree or two
+// against it; they share its voxels. A parallel surface elsewhere (a table above the floor)
+// shares none.
+bool DuplicatesOne(const Plane& plane, const std::vector<Plane>& accepted,
+                   const std::vector<WeightedPoint>& points, double band, double cos_angle,
+                   double distance) {
+  std::vector<double> shared(accepted.size(), 0.0);
+  std::vector<bool> parallel(accepted.size());
+  bool any = false;
+  for (std::size_t i = 0; i < accepted.size(); ++i) {
+    parallel[i] = std::abs(plane.normal.dot(accepted[i].normal)) > cos_angle;
+    any |= parallel[i];
+  }
+  if (!any) return false;
+  double total = 0.0;
+  for (const auto& wp : points) {
+    if (std::abs(plane.normal.dot(wp.p) - plane.distance_m) > band) continue;
+    total += wp.w;
+    for (std::size_t i = 0; i < accepted.size(); ++i) {
+      const Plane& a = accepted[i];
+      if (parallel[i] && std::abs(a.normal.dot(wp.p) - a.distance_m) <= distance) {
+        shared[i] += wp.w;
+      }
+    }
+  }
+  for (const double w : shared) {
+    if (total > 0.0 && w >= 0.5 * total) return true;
+  }
+  return false;
+}
+
 // Peaks refined into planes, strongest first, each claiming its supporting voxels.
 std::vector<Plane> ExtractPlanes(const std::vector<Peak>& peaks, std::vector<WeightedPoint>* points,
                                  const HoughOptions& options, double band, Poller* poller) {
   const double cos_nms = std::cos(options.nms_angle_rad);
-  auto near = [&](const Eigen::Vector3d& n1, double d1, const Eigen::Vector3d& n2, double d2) {
-    return (n1.dot(n2) > cos_nms && std::abs(d1 - d2) < options.nms_distance_m) ||
-           (-n1.dot(n2) > cos_nms && std::abs(d1 + d2) < options.nms_distance_m);
+  // A candidate (n, d) duplicates an accepted plane when their normals are within the angle
+  // and the candidate passes within the distance of the accepted plane's support (its
+  // centroid): measured there, not at the world origin, where a 1-degree tilt 4 m away moves d
+  // by 7 cm.
+  auto near = [&](const Eigen::Vector3d& n, double d, const Plane& a, const Eigen::Vector3d& at) {
+    return std::abs(n.dot(a.normal)) > cos_nms &&
+           std::abs(n.dot(at) - d) < options.nms_distance_m;
   };
   std::vector<Plane> planes;
-  std::vector<Peak> accepted;
+  // Every refined candidate with support, accepted or not, and its support's centroid: a later
+  // peak near one of them would refine to it again. At most kMaxCandidates are refined.
+  std::vector<std::pair<Plane, Eigen::Vector3d>> seen;
+  const std::size_t kMaxCandidates = 32 * options.max_planes;
+  std::size_t candidates = 0;
   for (const Peak& peak : peaks) {
-    if (planes.size() >= options.max_planes || poller->Tick(points->size() * 8)) break;
+    if (planes.size() >= options.max_planes || candidates >= kMaxCandidates ||
+        poller->Tick(points->size() * 8)) {
+      break;
+    }
     bool suppressed = false;
-    for (const Peak& a : accepted) suppressed |= near(peak.normal, peak.d, a.normal, a.d);
-    for (const Plane& a : planes) suppressed |= near(peak.normal, peak.d, a.normal, a.distance_m);
+    for (const auto& [a, at] : seen) suppressed |= near(peak.normal, peak.d, a, at);
+    for (const Plane& a : planes) suppressed |= Crosses(peak, a, cos_nms, options.nms_distance_m);
     if (suppressed) continue;
-    accepted.push_back(peak);
+    ++candidates;
     Eigen::Vector3d n = peak.normal;
     double d = peak.d;
     if (!Refine(*points, band, options.refine_iterations, &n, &d)) continue;
     Plane plane = CanonicalPlane(n, d);
     plane.extent.setEmpty();
     double sq = 0.0;
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     // Support: voxels near the plane not explained by a stronger plane. Without this, planes
     // cutting obliquely through a strong plane's voxels would be reported as well.
     for (const auto& wp : *points) {
@@ -236,17 +336,20 @@ std::vector<Plane> ExtractPlanes(const std::vector<Peak>& peaks, std::vector<Wei
       ++plane.support_voxels;
       plane.votes += wp.w;
       sq += r * r;
+      centroid += wp.w * wp.p;
       plane.extent.extend(wp.p);
     }
+    if (plane.support_voxels == 0) continue;
+    centroid /= plane.votes;
+    seen.emplace_back(plane, centroid);
     if (plane.support_voxels < options.min_support_voxels) continue;
     plane.rms_m = std::sqrt(sq / static_cast<double>(plane.support_voxels));
-    bool duplicate = false;
-    for (const Plane& a : planes) {
-      duplicate |= near(plane.normal, plane.distance_m, a.normal, a.distance_m);
-    }
-    if (duplicate) continue;
+    if (DuplicatesOne(plane, planes, *points, band, cos_nms, options.nms_distance_m)) continue;
+    // The plane claims its voxels out to the suppression distance: the rest of a thick surface
+    // would otherwise refine into copies of it (which DuplicatesOne refuses, one by one).
+    const double claim = std::max(band, options.nms_distance_m);
     for (auto& wp : *points) {
-      if (std::abs(plane.normal.dot(wp.p) - plane.distance_m) <= band) wp.claimed = true;
+      if (std::abs(plane.normal.dot(wp.p) - plane.distance_m) <= claim) wp.claimed = true;
     }
     planes.push_back(plane);
   }
@@ -277,6 +380,9 @@ bool HoughOptions::IsValid(std::string* why) const {
     return fail("support_distance_m must be finite and >= 0");
   }
   if (refine_iterations < 0) return fail("refine_iterations must be >= 0");
+  if (vote_merge_voxels < 1 || vote_merge_voxels > 64) {
+    return fail("vote_merge_voxels must lie in 1..64");
+  }
   if (region && (!region->min().allFinite() || !region->max().allFinite() ||
                  (region->min().array() > region->max().array()).any())) {
     return fail("region must be finite with min <= max");
@@ -307,9 +413,19 @@ PlaneSearch SearchPlanes(const octomap::OcTree& tree, const HoughOptions& option
     return search;
   }
   acc.Allocate();
-  Vote(points, &acc, &poller);
+  // The voters merged into cubes of vote_merge_voxels voxels a side (a plane's merged voters
+  // stay on it); the refinement below fits the voxels themselves.
+  const double merge_m = options.vote_merge_voxels * tree.getResolution();
+  const std::vector<WeightedPoint> voters =
+      options.vote_merge_voxels > 1 ? MergedVoters(points, merge_m, &poller) : points;
   if (poller.stopped()) return stopped();
-  const std::vector<Peak> peaks = FindPeaks(acc, &poller);
+  Vote(voters, &acc, &poller);
+  if (poller.stopped()) return stopped();
+  // A cell with fewer votes than a quarter of the least support a plane may have (its voxels
+  // at the least occupancy that votes) cannot become one: its neighbours are not looked at.
+  const auto min_votes = static_cast<float>(0.25 * static_cast<double>(options.min_support_voxels) *
+                                            std::max(options.min_probability, 0.01));
+  const std::vector<Peak> peaks = FindPeaks(acc, min_votes, &poller);
   if (poller.stopped()) return stopped();
   const double band = options.support_distance_m > 0.0 ? options.support_distance_m
                                                         : 1.5 * tree.getResolution();

@@ -29,6 +29,7 @@
 #include "fusion/clients/importers.h"
 #include "fusion/core/beam_grid.h"
 #include "fusion/core/calibration.h"
+#include "fusion/core/planes.h"
 #include "fusion/core/world_map.h"
 #include "fusion/service/config.h"
 
@@ -190,6 +191,7 @@ struct Evidence {
   octomap::OcTree grid;  // only for its key <-> coordinate conversions
   KeySet point_voxels;   // voxels holding a measured point (within the sensor's range)
   fusion::PlaneCoefficients floor = fusion::PlaneCoefficients(0, 0, 1, 0);
+  Eigen::Vector3d floor_centroid = Eigen::Vector3d::Zero();  // of the points on the floor
   // Per map column (x, y keys): whether every point in it lies within 4 cm of the floor.
   std::map<std::pair<int, int>, bool> columns;
   explicit Evidence(double resolution_m) : grid(resolution_m) {}
@@ -220,6 +222,13 @@ std::optional<Evidence> GatherEvidence(const std::vector<Frame>& frames, double 
   }
   e.floor = floor.plane;
   if (e.floor[2] < 0) e.floor = -e.floor;  // normal up
+  std::size_t on_floor = 0;
+  for (const Eigen::Vector3d& p : near_floor) {
+    if (std::abs(FloorDistance(e.floor, p)) > fit.inlier_distance_m) continue;
+    e.floor_centroid += p;
+    ++on_floor;
+  }
+  e.floor_centroid /= static_cast<double>(std::max<std::size_t>(1, on_floor));
   for (const Eigen::Vector3d& w : world) {
     const octomap::OcTreeKey k = e.grid.coordToKey(w.x(), w.y(), w.z());
     e.point_voxels.insert(k);
@@ -291,6 +300,48 @@ Scores Score(const std::vector<octomap::OcTreeKey>& occupied, const Evidence& e)
   return s;
 }
 
+// FindPlanes' search (the service's default options) on a map: how the floor comes back. A
+// floor plane is one within 10 degrees of the fitted floor's normal and within 0.1 m (the
+// search's suppression distance) of it where the floor's points are (their centroid).
+struct FloorPlanes {
+  std::size_t planes = 0, floor_planes = 0;
+  double angle_deg = 0.0, height_mm = 0.0, time_s = 0.0;
+  bool strongest_is_floor = false;
+};
+
+FloorPlanes FindFloorPlanes(const octomap::OcTree& tree, const fusion::PlaneCoefficients& floor,
+                            const Eigen::Vector3d& floor_centroid) {
+  FloorPlanes f;
+  const auto t0 = Clock::now();
+  const fusion::PlaneSearch search = fusion::SearchPlanes(tree, fusion::HoughOptions{});
+  f.time_s = SecondsSince(t0);
+  f.planes = search.planes.size();
+  const Eigen::Vector3d up = floor.head<3>();
+  for (std::size_t i = 0; i < search.planes.size(); ++i) {
+    const fusion::Plane& p = search.planes[i];
+    const double angle = std::acos(std::min(1.0, std::abs(p.normal.dot(up)))) * 180.0 / kPi;
+    // Height of this plane above the fitted floor along the floor's normal through the floor
+    // points' centroid.
+    const double along = p.normal.dot(up);
+    const double height =
+        std::abs(along) < 1e-6 ? 1e9 : (p.distance_m - p.normal.dot(floor_centroid)) / along;
+    if (angle > 10.0 || std::abs(height) > 0.1) continue;
+    if (f.floor_planes++ == 0) {
+      f.angle_deg = angle;
+      f.height_mm = 1000.0 * height;
+      f.strongest_is_floor = i == 0;
+    }
+  }
+  return f;
+}
+
+void PrintFloorPlanes(const std::string& name, const FloorPlanes& f) {
+  std::printf("  %s: FindPlanes %.2f s, %zu planes, %zu of them the floor; the strongest floor "
+              "plane %.2f deg and %+.1f mm from the fitted floor%s\n",
+              name.c_str(), f.time_s, f.planes, f.floor_planes, f.angle_deg, f.height_mm,
+              f.strongest_is_floor ? " (the strongest plane)" : "");
+}
+
 void PrintRow(const std::string& name, double time_s, const Scores& s) {
   std::printf("| %s | %zu | %.1f %% | %.1f %% | %.1f | %+.1f | %.1f %% | %.2f |\n", name.c_str(),
               s.occupied, 100.0 * s.holding, 100.0 * s.within_one, s.floor_thickness_mm,
@@ -356,6 +407,7 @@ int RunTum(const Options& o) {
       {"ours, hand-typed model, pinhole grid", HandKinect(o.stride, true)},
       {"ours, kinect_v1 preset (fitted model, pinhole grid)", fitted},
   };
+  std::vector<std::pair<std::string, FloorPlanes>> planes;
   for (const auto& [name, spec] : rows) {
     const auto map = MapWithCore(spec, o.resolution_m, frames);
     if (!map) {
@@ -363,11 +415,15 @@ int RunTum(const Options& o) {
       return 1;
     }
     PrintRow(name, map->time_s, Score(OccupiedVoxels(*map->tree, occupied_threshold), *evidence));
+    planes.emplace_back(name,
+                        FindFloorPlanes(*map->tree, evidence->floor, evidence->floor_centroid));
     std::fflush(stdout);
   }
   const Built octomap = MapWithOctoMap(o.resolution_m, preset.r_max_m, frames);
   PrintRow("OctoMap insertPointCloud", octomap.time_s,
            Score(OccupiedVoxels(*octomap.tree, octomap.tree->getOccupancyThres()), *evidence));
+  std::printf("\nplanes (HoughOptions' defaults, as FindPlanes):\n");
+  for (const auto& [name, f] : planes) PrintFloorPlanes(name, f);
   return 0;
 }
 

@@ -66,6 +66,35 @@ TEST(Planes, FindsBoardAndFloor) {
   EXPECT_NEAR(floor.distance_m, 0.41, 0.005);
 }
 
+// A floor 5 m from the world origin, thickened (three layers of voxels) and crossed by a ghost
+// of itself tilted by 1.5 degrees (a frame whose pose was off) comes back as one plane; a table
+// 0.7 m above it, parallel, stays a plane of its own. Judged at the support: 5 m out a
+// 1.5-degree tilt moves the ghost's distance from the origin by 13 cm, more than the
+// suppression distance.
+TEST(Planes, AThickFloorAndItsTiltedGhostAreOnePlane) {
+  octomap::OcTree tree(kRes);
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX(), y = Eigen::Vector3d::UnitY();
+  for (const double z : {0.0, 0.02, 0.04}) AddPlanePatch(&tree, {5.0, 0.0, z}, x, y, 1.5, 1.5, 2.0f);
+  const double tilt = 1.5 * kDeg;
+  const Eigen::Vector3d tilted_x(std::cos(tilt), 0.0, std::sin(tilt));
+  AddPlanePatch(&tree, {5.0, 0.0, 0.02}, tilted_x, y, 1.5, 1.5, 1.0f);
+  AddPlanePatch(&tree, {5.0, 0.0, 0.72}, x, y, 0.5, 0.4, 2.0f);
+  tree.updateInnerOccupancy();
+  const auto planes = DetectPlanes(tree);
+  int floors = 0, tables = 0;
+  for (const Plane& p : planes) {
+    if (std::abs(p.normal.z()) < std::cos(10 * kDeg)) continue;
+    const double height = p.distance_m / p.normal.z() - p.normal.x() / p.normal.z() * 5.0;
+    floors += std::abs(height - 0.02) < 0.1 ? 1 : 0;
+    tables += std::abs(height - 0.72) < 0.1 ? 1 : 0;
+  }
+  EXPECT_EQ(floors, 1);
+  EXPECT_EQ(tables, 1);
+  // The floor is the strongest, level within a degree (the ghost's voxels are a quarter).
+  ASSERT_FALSE(planes.empty());
+  EXPECT_GT(std::abs(planes[0].normal.z()), std::cos(1.0 * kDeg));
+}
+
 TEST(Planes, TiltedPlaneAndRegion) {
   octomap::OcTree tree(kRes);
   const Eigen::Vector3d n = NormalFromAngles(30 * kDeg, 60 * kDeg);
@@ -117,7 +146,7 @@ TEST(Planes, AStopRequestEndsTheSearchInEveryPhase) {
   options.stop = [&polls] { return ++polls > 1000000; };
   ASSERT_EQ(SearchPlanes(tree, options).status, PlaneSearchStatus::kOk);
   const int polls_in_full_search = polls;
-  ASSERT_GT(polls_in_full_search, 10);
+  ASSERT_GT(polls_in_full_search, 4);
   // Stopping at each poll of the full search ends it there: nothing found, status kStopped.
   for (int stop_at : {1, polls_in_full_search / 3, polls_in_full_search - 1}) {
     polls = 0;

@@ -1,7 +1,7 @@
 // Plane detection on the fused octree (paper Sec. V): a Hough transform over
-// (phi, theta, d) voting with the occupancy probability of every leaf, peak
-// extraction with non-maximum suppression and a weighted least-squares
-// refinement on the supporting voxels.
+// (phi, theta, d) voting with the occupancy probability of every leaf (merged into small
+// cubes first), peak extraction with non-maximum suppression measured at each plane's
+// support, and a weighted least-squares refinement on the supporting voxels.
 //
 // Convention: a plane is {p : n . p = d} in the world frame with d >= 0
 // (metres) and unit normal n = (sin(theta) cos(phi), sin(theta) sin(phi),
@@ -33,8 +33,8 @@ struct HoughOptions {
   // unset.
   std::optional<Eigen::AlignedBox3d> region;
   std::size_t max_planes = 8;
-  // Peaks closer than this to a stronger one (normal angle and distance) are
-  // suppressed.
+  // Peaks closer than this to a stronger plane are suppressed: normals within the angle and
+  // the peak's plane within the distance of the stronger plane's support (its centroid).
   double nms_angle_rad = 10.0 * kDegree;
   double nms_distance_m = 0.10;
   // A plane needs at least this many supporting voxels after refinement.
@@ -43,6 +43,10 @@ struct HoughOptions {
   // = 1.5 voxels.
   double support_distance_m = 0.0;
   int refine_iterations = 3;
+  // Voters are merged into cubes of this many voxels a side before they vote (one voter per
+  // cube at its voxels' weighted centroid, their summed weight): the peaks stay, the votes
+  // cost ~1 / n^2 for surfaces. 1: every leaf votes alone. The refinement fits the voxels.
+  int vote_merge_voxels = 4;
   // Work bounds. A search whose accumulator (normals x distance bins, plus the normals
   // themselves) would exceed this many cells is refused before it allocates (0 = no bound).
   std::size_t max_accumulator_cells = 0;
@@ -51,8 +55,8 @@ struct HoughOptions {
   std::function<bool()> stop;
 
   // Bins positive and finite (angles at most pi), min_probability in [0, 1), at least one
-  // plane, suppression and support distances finite and >= 0, refine_iterations >= 0, a
-  // region finite with min <= max. False with *why (may be null) naming the field.
+  // plane, suppression and support distances finite and >= 0, refine_iterations >= 0,
+  // vote_merge_voxels in 1..64, a region finite with min <= max. False with *why (may be null) naming the field.
   [[nodiscard]] bool IsValid(std::string* why = nullptr) const;
 };
 
