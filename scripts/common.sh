@@ -9,7 +9,8 @@ PACKAGES=(build-essential cmake ninja-build pkg-config
   cyclonedds-dev cyclonedds-tools libeigen3-dev liboctomap-dev octomap-tools
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libspdlog-dev googletest libgtest-dev libgmock-dev libbenchmark-dev
-  libpng-dev python3-grpcio docker-compose prometheus-cpp-dev prometheus)
+  libpng-dev python3-grpcio docker-compose prometheus-cpp-dev prometheus
+  libsqlite3-dev libzstd-dev liblz4-dev libfastrtps-dev libfastcdr-dev fastddsgen)
 
 log() { printf '\033[1m==> %s\033[0m\n' "$*"; }
 

@@ -13,6 +13,7 @@
 #include "fusion/clients/cli.h"
 #include "fusion/clients/importers.h"
 #include "fusion/clients/recording.h"
+#include "fusion/clients/rosbag2.h"
 #include "fusion/clients/sensor_block.h"
 
 namespace {
@@ -31,6 +32,7 @@ Subcommands:
   pcd     PCD files (ascii, binary, binary_compressed), one cloud per file
   graph   OctoMap binary scan graph (.graph), one cloud per node
   scan    plain "x y z" text scans (.bz2 allowed), one cloud per file (or per NODE line)
+  rosbag2 ROS 2 bag (sqlite3 .db3 or MCAP): PointCloud2 or depth Image topic, poses from tf
 
 Every cloud keeps its points in the sensor's optical frame (x right, y down, z forward;
 metres, NaN = no return) and that frame's pose in the world. Inspect the result with:
@@ -128,6 +130,7 @@ struct Options {
   std::string output, sensor_id;
   std::vector<std::string> inputs;
   fusion::clients::TumOptions tum;
+  fusion::clients::Rosbag2Options rosbag2;
   fusion::v1::RecordedPose pose;  // --pose: sensor (pcd) or the --frame (scan) in the world
   bool pose_given = false, ignore_viewpoint = false, print_sensor = false;
   fusion::clients::PointFrame frame = fusion::clients::PointFrame::kOptical;  // scan, graph
@@ -149,6 +152,7 @@ std::optional<int> ParseSubcommand(int argc, char** argv, Options* o) {
   if (o->sub == "pcd") o->usage = kPcdUsage, o->default_id = "pcd";
   if (o->sub == "graph") o->usage = kGraphUsage, o->default_id = "scanner";
   if (o->sub == "scan") o->usage = kScanUsage, o->default_id = "scanner";
+  if (o->sub == "rosbag2") o->usage = fusion::clients::kRosbag2Usage, o->default_id = "ros2";
   if (o->usage == nullptr) {
     std::fprintf(stderr, "fusion-import: unknown subcommand '%s'\n\n%s", o->sub.c_str(), kUsage);
     return fusion::clients::kExitUsage;
@@ -193,6 +197,8 @@ bool ApplyValue(const std::string& arg, const std::string& v, Options* o, Status
     o->sensor_id = v;
   } else if (o->sub == "tum") {
     return ApplyTumValue(arg, v, &o->tum, s);
+  } else if (o->sub == "rosbag2") {
+    return fusion::clients::ApplyRosbag2Option(arg, v, &o->rosbag2, s);
   } else if ((o->sub == "pcd" || o->sub == "scan") && arg == "--pose") {
     *s = fusion::clients::ParsePose(arg, v, &o->pose);
     o->pose_given = true;
@@ -242,11 +248,18 @@ std::optional<int> ParseOptions(int argc, char** argv, Options* o) {
   }
   if (o->output.empty()) return fusion::clients::UsageError(o->tool, "missing -o OUTPUT");
   if (o->inputs.empty()) return fusion::clients::UsageError(o->tool, "missing input");
-  if ((o->sub == "tum" || o->sub == "graph") && o->inputs.size() != 1) {
+  if ((o->sub == "tum" || o->sub == "graph" || o->sub == "rosbag2") && o->inputs.size() != 1) {
     return fusion::clients::UsageError(o->tool, "expects exactly one input");
   }
   if (o->sensor_id.empty())
     return fusion::clients::UsageError(o->tool, "--sensor-id must not be empty");
+  if (o->sub == "rosbag2") {
+    o->rosbag2.bag = o->inputs[0];
+    o->rosbag2.sensor_id = o->sensor_id;
+    if (Status s = fusion::clients::CheckRosbag2Options(o->rosbag2); !s.ok()) {
+      return fusion::clients::UsageError(o->tool, s.message());
+    }
+  }
   return std::nullopt;
 }
 
@@ -325,6 +338,14 @@ Status ImportMultiCloudFiles(const Options& o, Sink* sink) {
   return Status::Ok();
 }
 
+// rosbag2: one bag; progress, skips and notes on stderr.
+Status ImportBag(Options* o, Sink* sink) {
+  o->rosbag2.progress = stderr;
+  return fusion::clients::ImportRosbag2(o->rosbag2, [sink](fusion::v1::RecordedCloud&& cloud) {
+    return sink->Append(std::move(cloud));
+  });
+}
+
 // *image: the size of TUM's depth images.
 Status Import(Options* o, Sink* sink, fusion::clients::ImageSize* image) {
   if (o->sub == "tum") {
@@ -336,6 +357,7 @@ Status Import(Options* o, Sink* sink, fusion::clients::ImageSize* image) {
         image);
   }
   if (o->sub == "pcd") return ImportPcdFiles(*o, sink);
+  if (o->sub == "rosbag2") return ImportBag(o, sink);
   return ImportMultiCloudFiles(*o, sink);
 }
 
@@ -345,8 +367,9 @@ Status PrintSensor(const Options& o, const Sink& sink, const fusion::clients::Im
   std::string notes;
   if (o.sub == "tum") {
     sensor = fusion::clients::TumSensorConfig(o.tum, image);
-  } else if (Status s = sink.geometry().Describe(o.sensor_id, o.sub == "pcd" ? "" : "laser_3d",
-                                                 &sensor, &notes);
+  } else if (Status s = sink.geometry().Describe(
+                 o.sensor_id, o.sub == "pcd" || o.sub == "rosbag2" ? "" : "laser_3d", &sensor,
+                 &notes);
              !s.ok()) {
     return Status::Error("--print-sensor: " + s.message());
   }

@@ -13,6 +13,7 @@
 #include "fusion/core/fusion_rules.h"
 #include "fusion/core/world_map.h"
 #include "fusion/service/conversions.h"
+#include "fusion/service/ros2_ingest.h"
 #include "fusion/service/security.h"
 
 namespace fusion::service {
@@ -209,6 +210,8 @@ fusion::v1::ServiceConfig DefaultConfig() {
   ingest->set_max_abs_translation_m(1e5);
   ingest->set_max_queued_mb(256);
   config.mutable_persistence()->set_interval_s(30);
+  config.mutable_ros2()->set_map_frame("map");
+  config.mutable_ros2()->set_tf_history_s(Ros2IngestOptions::kDefaultTfHistoryS);
   auto* limits = config.mutable_limits();
   limits->set_max_points_per_query(100'000);
   limits->set_max_update_streams(64);
@@ -275,6 +278,7 @@ Status ValidateConfig(const fusion::v1::ServiceConfig& config) {
         ValidateSecurity(config.security()), ValidateMetrics(config.metrics())}) {
     if (!part.ok()) return part;
   }
+  if (const auto ros2 = Ros2IngestOptionsFromConfig(config); !ros2.ok()) return ros2.status();
   return Status::Ok();
 }
 

@@ -294,6 +294,125 @@ Cloud CloudFromDds(const fusion_dds_PointCloud& sample) {
   return cloud;
 }
 
+namespace {
+
+std::string Text(const char* text) { return text != nullptr ? text : ""; }
+
+ros2::Header Ros2FromDds(const std_msgs_msg_dds__Header_& header) {
+  return {{header.stamp.sec, header.stamp.nanosec}, Text(header.frame_id)};
+}
+
+ros2::ByteView View(const dds_sequence_uint8& bytes) {
+  return bytes._buffer != nullptr ? ros2::ByteView(bytes._buffer, bytes._length) : ros2::ByteView();
+}
+
+}  // namespace
+
+ros2::PointCloud2 Ros2FromDds(const sensor_msgs_msg_dds__PointCloud2_& sample) {
+  ros2::PointCloud2 msg;
+  msg.header = Ros2FromDds(sample.header);
+  msg.height = sample.height;
+  msg.width = sample.width;
+  const std::uint32_t fields = sample.fields._buffer != nullptr ? sample.fields._length : 0;
+  msg.fields.reserve(fields);
+  for (std::uint32_t i = 0; i < fields; ++i) {
+    const auto& f = sample.fields._buffer[i];
+    msg.fields.push_back({Text(f.name), f.offset, f.datatype, f.count});
+  }
+  msg.is_bigendian = sample.is_bigendian;
+  msg.point_step = sample.point_step;
+  msg.row_step = sample.row_step;
+  msg.data = View(sample.data);
+  msg.is_dense = sample.is_dense;
+  return msg;
+}
+
+ros2::Image Ros2FromDds(const sensor_msgs_msg_dds__Image_& sample) {
+  ros2::Image image;
+  image.header = Ros2FromDds(sample.header);
+  image.height = sample.height;
+  image.width = sample.width;
+  image.encoding = Text(sample.encoding);
+  image.is_bigendian = sample.is_bigendian;
+  image.step = sample.step;
+  image.data = View(sample.data);
+  return image;
+}
+
+ros2::CameraInfo Ros2FromDds(const sensor_msgs_msg_dds__CameraInfo_& sample) {
+  ros2::CameraInfo info;
+  info.header = Ros2FromDds(sample.header);
+  info.height = sample.height;
+  info.width = sample.width;
+  info.distortion_model = Text(sample.distortion_model);
+  if (sample.d._buffer != nullptr) {
+    info.d.assign(sample.d._buffer, sample.d._buffer + sample.d._length);
+  }
+  std::copy(std::begin(sample.k), std::end(sample.k), info.k.begin());
+  std::copy(std::begin(sample.r), std::end(sample.r), info.r.begin());
+  std::copy(std::begin(sample.p), std::end(sample.p), info.p.begin());
+  info.binning_x = sample.binning_x;
+  info.binning_y = sample.binning_y;
+  info.roi = {sample.roi.x_offset, sample.roi.y_offset, sample.roi.height, sample.roi.width,
+              sample.roi.do_rectify};
+  return info;
+}
+
+ros2::TFMessage Ros2FromDds(const tf2_msgs_msg_dds__TFMessage_& sample) {
+  ros2::TFMessage msg;
+  const std::uint32_t n = sample.transforms._buffer != nullptr ? sample.transforms._length : 0;
+  msg.transforms.reserve(n);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const auto& t = sample.transforms._buffer[i];
+    ros2::TransformStamped out;
+    out.header = Ros2FromDds(t.header);
+    out.child_frame_id = Text(t.child_frame_id);
+    const auto& tr = t.transform.translation;
+    const auto& q = t.transform.rotation;
+    out.transform.translation = {tr.x, tr.y, tr.z};
+    out.transform.rotation = {q.x, q.y, q.z, q.w};
+    msg.transforms.push_back(std::move(out));
+  }
+  return msg;
+}
+
+Eigen::Isometry3d IsometryFromRos2(const ros2::Transform& transform) {
+  const auto& q = transform.rotation;
+  const auto& t = transform.translation;
+  const double norm = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+  const Eigen::Quaterniond unit(q.w / norm, q.x / norm, q.y / norm, q.z / norm);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = unit.toRotationMatrix();
+  T.translation() = Eigen::Vector3d(t.x, t.y, t.z);
+  return T;
+}
+
+std::string Ros2FrameId(const std::string& frame_id) {
+  return !frame_id.empty() && frame_id.front() == '/' ? frame_id.substr(1) : frame_id;
+}
+
+Cloud CloudFromRos2(const std::string& sensor_id, std::uint64_t sequence_number, double stamp_s,
+                    const Eigen::Isometry3d& T_map_frame, const Eigen::Isometry3d* T_sensor_frame,
+                    std::uint32_t width, std::uint32_t height, std::vector<float> xyz) {
+  Cloud cloud;
+  cloud.sensor_id = sensor_id;
+  cloud.sequence_number = sequence_number;
+  cloud.stamp_s = stamp_s;
+  cloud.T_world_published = T_map_frame;
+  cloud.width = width;
+  cloud.height = height;
+  if (T_sensor_frame != nullptr) {
+    const Eigen::Matrix3f R = T_sensor_frame->linear().cast<float>();
+    const Eigen::Vector3f t = T_sensor_frame->translation().cast<float>();
+    for (std::size_t i = 0; i + 2 < xyz.size(); i += 3) {
+      Eigen::Map<Eigen::Vector3f> p(&xyz[i]);
+      p = R * p + t;  // NaN (no return) stays NaN
+    }
+  }
+  cloud.xyz = std::move(xyz);
+  return cloud;
+}
+
 Eigen::Vector3d FromProto(const fusion::v1::Point& p) { return {p.x(), p.y(), p.z()}; }
 
 void ToProto(const Eigen::Vector3d& v, fusion::v1::Point* p) {

@@ -26,7 +26,7 @@ std::string DdsError(const char* call, dds_return_t rc) {
 }  // namespace
 
 DdsIngest::DdsIngest(IngestQueues* queues, DdsIngestOptions options)
-    : queues_(queues), options_(std::move(options)) {}
+    : queues_(queues), options_(std::move(options)), log_(options_.log_interval) {}
 
 DdsIngest::~DdsIngest() { Stop(); }
 
@@ -137,7 +137,7 @@ bool DdsIngest::AcceptSensor(const void* sample, void* self) {
   if (!reason) return true;
   const std::string sensor_id = id != nullptr ? id : "";
   ingest->queues_->CountRejected(sensor_id, *reason);
-  ingest->LogRejection(*reason, sensor_id, detail);
+  ingest->log_.Log(*reason, sensor_id, detail);
   return false;
 }
 
@@ -158,30 +158,13 @@ void DdsIngest::Handle(const fusion_dds_PointCloud& sample) {
   const std::string sensor_id = sample.sensor_id != nullptr ? sample.sensor_id : "";
   if (reason) {
     queues_->CountRejected(sensor_id, *reason);
-    LogRejection(*reason, sensor_id, detail);
+    log_.Log(*reason, sensor_id, detail);
     return;
   }
   // Reliable ingest waits for room (lossless); sensor data replaces the oldest cloud.
   Cloud cloud = CloudFromDds(sample);
   cloud.received_at = std::chrono::steady_clock::now();
   (void)queues_->Push(std::move(cloud), options_.reliable ? &stop_ : nullptr);
-}
-
-void DdsIngest::LogRejection(RejectReason reason, const std::string& sensor_id,
-                             const std::string& detail) {
-  const auto i = static_cast<std::size_t>(reason);
-  const auto now = std::chrono::steady_clock::now();
-  std::lock_guard<std::mutex> lock(log_mutex_);
-  if (now - last_log_[i] < options_.log_interval) {
-    ++suppressed_[i];
-    return;
-  }
-  last_log_[i] = now;
-  spdlog::warn("ingest: rejected cloud from '{}' ({}): {}{}", LoggableText(sensor_id),
-               RejectReasonName(reason),
-               detail,
-               suppressed_[i] > 0 ? fmt::format(" [{} more not logged]", suppressed_[i]) : "");
-  suppressed_[i] = 0;
 }
 
 }  // namespace fusion::service

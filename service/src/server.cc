@@ -10,6 +10,8 @@
 #include "fusion/service/map_service.h"
 #include "fusion/service/map_stack.h"
 #include "fusion/service/metrics.h"
+#include "fusion/service/ros2_ingest.h"
+#include "fusion/service/ros2_output.h"
 #include "fusion/service/security.h"
 
 namespace fusion::service {
@@ -18,6 +20,8 @@ struct FusionServer::Parts {
   std::unique_ptr<Metrics> metrics;  // first: the server's interceptors use it to the end
   std::unique_ptr<MapStack> stack;
   std::unique_ptr<DdsIngest> ingest;
+  std::unique_ptr<Ros2Ingest> ros2_ingest;  // sensors with a ros2_topic (none: no readers)
+  std::unique_ptr<Ros2Output> ros2_output;  // the map as octomap_msgs (off: no writers)
   std::unique_ptr<MapService> service;
 };
 
@@ -55,6 +59,14 @@ Status FusionServer::Start() {
   ingest_options.max_queued_bytes = std::size_t{config_.ingest().max_queued_mb()} << 20;
   p.ingest = std::make_unique<DdsIngest>(p.stack->queues(), ingest_options);
   if (Status started = p.ingest->Start(participant_); !started.ok()) return started;
+  auto ros2_options = Ros2IngestOptionsFromConfig(config_);
+  if (!ros2_options.ok()) return ros2_options.status();
+  p.ros2_ingest = std::make_unique<Ros2Ingest>(p.stack->queues(), std::move(*ros2_options));
+  if (Status started = p.ros2_ingest->Start(participant_); !started.ok()) return started;
+  auto output_options = Ros2OutputOptionsFromConfig(config_);
+  if (!output_options.ok()) return output_options.status();
+  p.ros2_output = std::make_unique<Ros2Output>(p.stack->state()->hub, std::move(*output_options));
+  if (Status started = p.ros2_output->Start(participant_); !started.ok()) return started;
 
   const auto credentials = ServerCredentialsFor(config_.security());
   if (!credentials.ok()) return credentials.status().WithContext("security");
@@ -123,6 +135,8 @@ Status FusionServer::Shutdown(std::chrono::milliseconds deadline) {
     server_.reset();
   }
   if (p.ingest) p.ingest->Stop();
+  if (p.ros2_ingest) p.ros2_ingest->Stop();
+  if (p.ros2_output) p.ros2_output->Stop();
   const Status saved = p.stack ? p.stack->Finish() : Status::Ok();
   if (p.metrics) p.metrics->Stop();  // before the state its scrapes read goes
   if (participant_ > 0) {

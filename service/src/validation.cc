@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "fusion/core/local_grid.h"
 
@@ -27,6 +28,28 @@ const char* RejectReasonName(RejectReason reason) {
       return "absurd_translation";
     case RejectReason::kOutsideMap:
       return "outside_map";
+    case RejectReason::kRos2FieldsMissing:
+      return "fields_missing";
+    case RejectReason::kRos2FieldType:
+      return "field_type";
+    case RejectReason::kRos2PointStep:
+      return "point_step";
+    case RejectReason::kRos2DataShort:
+      return "data_short";
+    case RejectReason::kRos2TooLarge:
+      return "too_large";
+    case RejectReason::kRos2Encoding:
+      return "encoding";
+    case RejectReason::kRos2CameraInfo:
+      return "camera_info";
+    case RejectReason::kCameraInfoMismatch:
+      return "camera_info_mismatch";
+    case RejectReason::kNoTransform:
+      return "no_transform";
+    case RejectReason::kTransformTooOld:
+      return "transform_too_old";
+    case RejectReason::kExtrapolation:
+      return "extrapolation";
     case RejectReason::kCount:
       break;
   }
@@ -121,6 +144,26 @@ std::optional<RejectReason> ValidateSample(
     return RejectReason::kOutsideMap;
   }
   return std::nullopt;
+}
+
+std::optional<RejectReason> ValidateCloud(
+    const Cloud& cloud, const IngestLimits& limits,
+    const std::function<bool(const std::string&)>& is_known_sensor, std::string* detail) {
+  // A view of the cloud as the DDS sample it could have been: one set of rules for both.
+  const Eigen::Quaterniond q(cloud.T_world_published.linear());
+  const Eigen::Vector3d t = cloud.T_world_published.translation();
+  fusion_dds_PointCloud view{};
+  view.sensor_id = const_cast<char*>(cloud.sensor_id.c_str());
+  view.T_world_sensor = {t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w()};
+  view.width = cloud.width;
+  view.height = cloud.height;
+  view.xyz._buffer = const_cast<float*>(cloud.xyz.data());
+  view.xyz._length = view.xyz._maximum = static_cast<std::uint32_t>(
+      std::min<std::size_t>(cloud.xyz.size(), std::numeric_limits<std::uint32_t>::max()));
+  view.beyond_range._buffer = const_cast<std::uint8_t*>(cloud.beyond_range.data());
+  view.beyond_range._length = view.beyond_range._maximum = static_cast<std::uint32_t>(
+      std::min<std::size_t>(cloud.beyond_range.size(), std::numeric_limits<std::uint32_t>::max()));
+  return ValidateSample(view, limits, is_known_sensor, detail);
 }
 
 }  // namespace fusion::service

@@ -24,7 +24,8 @@ add_library(fusion_fuzz_entries STATIC ${fuzz_entry_sources})
 add_library(fusion::fuzz_entries ALIAS fusion_fuzz_entries)
 target_include_directories(fusion_fuzz_entries PUBLIC ${CMAKE_CURRENT_LIST_DIR})
 target_link_libraries(fusion_fuzz_entries
-  PUBLIC ${fusion_fuzz_service_lib} fusion::clients_common PRIVATE fusion::warnings)
+  PUBLIC ${fusion_fuzz_service_lib} fusion::clients_common fusion::ros2_wire
+  PRIVATE fusion::warnings)
 
 # Where the replay test (tests/unit/fuzz/fuzz_regressions_test.cc) finds the inputs.
 target_compile_definitions(fusion_fuzz_entries PUBLIC

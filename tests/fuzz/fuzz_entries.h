@@ -41,6 +41,9 @@ Outcome RunXyzScan(const std::uint8_t* data, std::size_t size);
 Outcome RunScanGraph(const std::uint8_t* data, std::size_t size);
 // A map snapshot (.ot) through LoadSnapshotFile, the loader fusiond runs at start.
 Outcome RunSnapshot(const std::uint8_t* data, std::size_t size);
+// A serialized ROS 2 message (XCDR1) decoded as PointCloud2 (then PointsFromPointCloud2),
+// Image (then PointsFromDepthImage), CameraInfo and TFMessage (fusion/ros2/cdr.h, points.h).
+Outcome RunRos2Cdr(const std::uint8_t* data, std::size_t size);
 
 struct NamedEntry {
   const char* target;  // fuzz target name without "fuzz_": the corpus and regressions folder

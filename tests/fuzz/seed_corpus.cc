@@ -12,12 +12,14 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 
 #include "fusion/clients/importers.h"
 #include "fusion/clients/recording.h"
+#include "fusion/ros2/cdr.h"
 #include "fusion/service/config.h"
 #include "fusion/service/persistence.h"
 #include "fuzz_entries.h"
@@ -369,6 +371,56 @@ int Replay(const std::string& target, const std::string& path) {
   return 2;
 }
 
+// ---------------------------------------------------------------------------------------------
+// ROS 2 messages (XCDR1): a small organized PointCloud2 in both byte orders with a padded
+// layout, depth images 16UC1 / 32FC1, a CameraInfo and a TFMessage.
+
+std::string Cdr(const std::vector<std::uint8_t>& bytes) {
+  return std::string(bytes.begin(), bytes.end());
+}
+
+void Ros2Seeds() {
+  const Points scan = ScanPoints(6);
+  std::vector<std::uint8_t> data(6 * 16 + 2 * 4, 0);
+  for (std::size_t i = 0; i < 6; ++i) {
+    std::memcpy(&data[(i / 3) * 52 + (i % 3) * 16], scan[i].data(), 12);
+  }
+  fusion::ros2::PointCloud2 cloud;
+  cloud.header = {{1700000000, 5}, "lidar"};
+  cloud.height = 2, cloud.width = 3;
+  cloud.fields = {{"x", 0, fusion::ros2::PointField::FLOAT32, 1},
+                  {"y", 4, fusion::ros2::PointField::FLOAT32, 1},
+                  {"z", 8, fusion::ros2::PointField::FLOAT32, 1},
+                  {"intensity", 12, fusion::ros2::PointField::FLOAT32, 1}};
+  cloud.point_step = 16, cloud.row_step = 52;
+  cloud.data = fusion::ros2::ByteView(data);
+  Put("ros2_cdr", "cloud_3x2_le", Cdr(fusion::ros2::EncodeCdr(cloud)));
+  cloud.is_bigendian = true;  // the floats are host order: other values, same layout
+  Put("ros2_cdr", "cloud_3x2_be",
+      Cdr(fusion::ros2::EncodeCdr(cloud, fusion::ros2::CdrEndian::kBig)));
+  fusion::ros2::Image image;
+  image.header = {{1700000000, 2}, "camera_depth_optical_frame"};
+  image.width = 4, image.height = 3, image.encoding = "16UC1", image.step = 8;
+  std::vector<std::uint8_t> depth(24);
+  for (std::size_t i = 0; i < depth.size(); i += 2) depth[i] = 0xD0, depth[i + 1] = 0x07;  // 2 m
+  image.data = fusion::ros2::ByteView(depth);
+  Put("ros2_cdr", "depth_16uc1", Cdr(fusion::ros2::EncodeCdr(image)));
+  image.encoding = "32FC1", image.width = 2, image.step = 8;
+  Put("ros2_cdr", "depth_32fc1_be",
+      Cdr(fusion::ros2::EncodeCdr(image, fusion::ros2::CdrEndian::kBig)));
+  fusion::ros2::CameraInfo info;
+  info.header = image.header;
+  info.width = 4, info.height = 3, info.distortion_model = "plumb_bob", info.d = {0, 0, 0, 0, 0};
+  info.k = {520.9, 0, 325.1, 0, 521.0, 249.7, 0, 0, 1};
+  Put("ros2_cdr", "camera_info", Cdr(fusion::ros2::EncodeCdr(info)));
+  fusion::ros2::TFMessage tf;
+  tf.transforms.resize(2);
+  tf.transforms[0].header.frame_id = "map", tf.transforms[0].child_frame_id = "base_link";
+  tf.transforms[1].header.frame_id = "base_link", tf.transforms[1].child_frame_id = "lidar";
+  tf.transforms[1].transform.translation = {0.1, 0, 0.3};
+  Put("ros2_cdr", "tf_two", Cdr(fusion::ros2::EncodeCdr(tf)));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -391,6 +443,7 @@ int main(int argc, char** argv) {
   XyzSeeds();
   ScanGraphSeeds();
   SnapshotSeeds();
+  Ros2Seeds();
   std::printf("seeds written to %s (%s)\n", g_out.c_str(),
               g_shared.empty() ? "synthetic only" : ("real samples from " + g_shared).c_str());
   return ReportVerdicts();

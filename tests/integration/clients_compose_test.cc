@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 namespace {
@@ -51,7 +52,8 @@ TEST_F(ComposeTest, HasTheServicesAndHealthCheck) {
   std::string services;
   ASSERT_EQ(Shell("docker-compose -f '" + compose_ + "' config --services", &services), 0)
       << services;
-  for (const char* name : {"certs", "fusiond", "sensor-sr3000", "sensor-stoc", "client", "prometheus"}) {
+  for (const char* name :
+       {"certs", "fusiond", "sensor-sr3000", "sensor-stoc", "client", "prometheus"}) {
     EXPECT_NE(services.find(name), std::string::npos) << name << " missing in:\n" << services;
   }
   std::string config;
@@ -59,9 +61,46 @@ TEST_F(ComposeTest, HasTheServicesAndHealthCheck) {
   EXPECT_NE(config.find("health"), std::string::npos);
   EXPECT_NE(config.find("CYCLONEDDS_URI"), std::string::npos);
   // gRPC with TLS and tokens, and clients that present them.
-  for (const char* needed : {"--tls-cert", "--tokens-file", "FUSION_TLS_CA", "FUSION_TOKEN_FILE",
-                             "--metrics-listen"}) {
+  for (const char* needed :
+       {"--tls-cert", "--tokens-file", "FUSION_TLS_CA", "FUSION_TOKEN_FILE", "--metrics-listen"}) {
     EXPECT_NE(config.find(needed), std::string::npos) << needed;
+  }
+}
+
+// Profile ros2: fusiond on the host's network with the host DDS configuration and its domain
+// from ROS_DOMAIN_ID; fusiond has time to write its final snapshot before Docker kills it.
+TEST_F(ComposeTest, Ros2ProfileSharesTheHostNetworkAndStopsAreGraceful) {
+  std::string config;
+  ASSERT_EQ(
+      Shell("ROS_DOMAIN_ID=17 docker-compose -f '" + compose_ + "' --profile ros2 config", &config),
+      0)
+      << config;
+  const auto ros2 = config.find("  fusiond-ros2:\n");
+  ASSERT_NE(ros2, std::string::npos) << config;
+  // Up to the next service (a line indented by two spaces only).
+  std::size_t next = ros2 + 1;
+  do {
+    next = config.find("\n  ", next + 1);
+  } while (next != std::string::npos && config.compare(next + 3, 1, " ") == 0);
+  const std::string service = config.substr(ros2, next - ros2);
+  for (const char* needed : {"network_mode: host", "cyclonedds-host.xml", "fusiond-ros2.pbtxt",
+                             "- '17'", "--tokens-file", "stop_grace_period: 60s"}) {
+    EXPECT_NE(service.find(needed), std::string::npos) << needed << " missing in:\n" << service;
+  }
+  std::string services;
+  ASSERT_EQ(Shell("docker-compose -f '" + compose_ + "' config", &services), 0) << services;
+  const auto fusiond = services.find("  fusiond:\n");
+  ASSERT_NE(fusiond, std::string::npos);
+  EXPECT_NE(services.find("stop_grace_period: 60s", fusiond), std::string::npos);
+}
+
+// The build context leaves build trees and .git out (/.dockerignore).
+TEST_F(ComposeTest, DockerignoreKeepsBuildTreesOutOfTheContext) {
+  std::ifstream in(RepoDir() + "/.dockerignore");
+  ASSERT_TRUE(in.good()) << "no .dockerignore at the repository root";
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  for (const char* line : {"\nbuild*\n", "\n.git\n"}) {
+    EXPECT_NE(text.find(line), std::string::npos) << line;
   }
 }
 

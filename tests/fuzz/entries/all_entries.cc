@@ -13,6 +13,7 @@ const std::vector<NamedEntry>& AllEntries() {
       {"xyz_scan", RunXyzScan},
       {"scan_graph", RunScanGraph},
       {"snapshot", RunSnapshot},
+      {"ros2_cdr", RunRos2Cdr},
   };
   return entries;
 }

@@ -35,6 +35,21 @@ enum class RejectReason : int {
   kNonUnitQuaternion,
   kAbsurdTranslation,
   kOutsideMap,  // the pose lies beyond the map's keys (they would wrap around)
+  // ROS 2 ingest: the conversion's reasons (fusion/ros2/points.h, Ros2Reject; same names) ...
+  kRos2FieldsMissing,  // PointCloud2 without an x, y or z field
+  kRos2FieldType,      // x, y or z not FLOAT32
+  kRos2PointStep,      // point_step smaller than the x/y/z fields need
+  kRos2DataShort,      // data shorter than row_step * height, or a row than its points
+  kRos2TooLarge,       // more points than ingest.max_points
+  kRos2Encoding,       // an image encoding that is not 16UC1 or 32FC1
+  kRos2CameraInfo,     // the image does not fit the sensor's intrinsics (size, focal length 0)
+  // ... a CameraInfo that disagrees with the configured pinhole intrinsics (the images of the
+  // sensor are rejected until one agrees) ...
+  kCameraInfoMismatch,
+  // ... and the pose look-up (fusion/core/transform_buffer.h, TransformStatus; same names).
+  kNoTransform,      // header.frame_id not connected to the map frame within ros2.tf_wait_s
+  kTransformTooOld,  // the stamp lies before the kept tf history (ros2.tf_history_s)
+  kExtrapolation,    // no transform at or after the stamp within ros2.tf_wait_s
   kCount,
 };
 constexpr std::size_t kRejectReasonCount = static_cast<std::size_t>(RejectReason::kCount);

@@ -15,10 +15,13 @@
 #include "fusion/core/sensor.h"
 #include "fusion/core/status.h"
 #include "fusion/core/world_map.h"
+#include "fusion/ros2/messages.h"
 #include "fusion/service/cloud.h"
 #include "fusion/v1/config.pb.h"
 #include "fusion/v1/map_service.pb.h"
 #include "fusion_dds.h"
+#include "sensor_msgs.h"
+#include "tf2_msgs.h"
 
 namespace fusion::service {
 
@@ -51,6 +54,25 @@ struct StateThresholds {
 // DDS -> core. The sample must have passed ValidateSample.
 [[nodiscard]] Eigen::Isometry3d IsometryFromDds(const fusion_dds_Pose& pose);
 [[nodiscard]] Cloud CloudFromDds(const fusion_dds_PointCloud& sample);
+
+// ROS 2 DDS samples (idl/ros2/) -> the ROS 2 wire library's messages (fusion/ros2/messages.h).
+// The `data` views point into the sample, nothing is copied: the sample must outlive them.
+[[nodiscard]] ros2::PointCloud2 Ros2FromDds(const sensor_msgs_msg_dds__PointCloud2_& sample);
+[[nodiscard]] ros2::Image Ros2FromDds(const sensor_msgs_msg_dds__Image_& sample);
+[[nodiscard]] ros2::CameraInfo Ros2FromDds(const sensor_msgs_msg_dds__CameraInfo_& sample);
+[[nodiscard]] ros2::TFMessage Ros2FromDds(const tf2_msgs_msg_dds__TFMessage_& sample);
+// T_parent_child of a tf transform; the quaternion normalised (a zero one gives NaN).
+[[nodiscard]] Eigen::Isometry3d IsometryFromRos2(const ros2::Transform& transform);
+// A tf frame id as tf2 compares them: without a leading '/'.
+[[nodiscard]] std::string Ros2FrameId(const std::string& frame_id);
+// A converted ROS 2 message (xyz in the message's frame, metres) as a Cloud of `sensor_id`:
+// T_world_published = T_map_frame; with T_sensor_frame (the inverse mount, when the mount is
+// not the identity) the points are moved into the sensor's frame, since the worker applies
+// the mount to the pose and takes the points as the sensor's.
+[[nodiscard]] Cloud CloudFromRos2(const std::string& sensor_id, std::uint64_t sequence_number,
+                                  double stamp_s, const Eigen::Isometry3d& T_map_frame,
+                                  const Eigen::Isometry3d* T_sensor_frame, std::uint32_t width,
+                                  std::uint32_t height, std::vector<float> xyz);
 
 // API <-> core.
 [[nodiscard]] Eigen::Vector3d FromProto(const fusion::v1::Point& p);

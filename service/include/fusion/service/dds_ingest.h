@@ -6,12 +6,12 @@
 
 #include <atomic>
 #include <chrono>
-#include <mutex>
 #include <string>
 #include <thread>
 
 #include "fusion/core/status.h"
 #include "fusion/service/ingest_queues.h"
+#include "fusion/service/rejection_log.h"
 #include "fusion/service/validation.h"
 
 namespace fusion::service {
@@ -48,7 +48,6 @@ class DdsIngest {
   static void OnWritersMatched(dds_entity_t reader, dds_subscription_matched_status_t status,
                                void* self);
   void Handle(const fusion_dds_PointCloud& sample);
-  void LogRejection(RejectReason reason, const std::string& sensor_id, const std::string& detail);
 
   IngestQueues* queues_;
   DdsIngestOptions options_;
@@ -59,9 +58,7 @@ class DdsIngest {
   dds_entity_t stop_condition_ = 0;
   std::atomic<bool> stop_{false};
   std::thread thread_;
-  std::mutex log_mutex_;  // LogRejection runs on the ingest thread and DDS's threads
-  std::array<std::chrono::steady_clock::time_point, kRejectReasonCount> last_log_{};
-  std::array<std::uint64_t, kRejectReasonCount> suppressed_{};
+  RejectionLog log_;  // used on the ingest thread and DDS's threads (the topic filter)
 };
 
 }  // namespace fusion::service

@@ -38,4 +38,10 @@ struct IngestLimits {
     const fusion_dds_PointCloud& sample, const IngestLimits& limits,
     const std::function<bool(const std::string&)>& is_known_sensor, std::string* detail);
 
+// The same checks on a cloud converted from another wire type (a ROS 2 message): its sizes and
+// T_world_published, by ValidateSample's rules.
+[[nodiscard]] std::optional<RejectReason> ValidateCloud(
+    const Cloud& cloud, const IngestLimits& limits,
+    const std::function<bool(const std::string&)>& is_known_sensor, std::string* detail);
+
 }  // namespace fusion::service
