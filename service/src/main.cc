@@ -147,15 +147,16 @@ int main(int argc, char** argv) {
   if (const fusion::Status valid = fusion::service::ValidateConfig(config); !valid.ok()) {
     return Fail(valid.message());
   }
-  // Logs go to stderr: stdout carries only the "listening on" line a parent may read.
-  fusion::service::SetUpLogging(config.log_format(), config.log_level());
-
-  // Block the stop signals in every thread; main waits for them below.
+  // Block the stop signals in every thread, before the first one (the log's) starts: a stop
+  // signal must reach main's wait below, not kill the process on a thread that never blocked it.
   sigset_t stop_signals;
   sigemptyset(&stop_signals);
   sigaddset(&stop_signals, SIGINT);
   sigaddset(&stop_signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+
+  // Logs go to stderr: stdout carries only the "listening on" line a parent may read.
+  fusion::service::SetUpLogging(config.log_format(), config.log_level());
 
   fusion::service::FusionServer server(config);
   if (const fusion::Status started = server.Start(); !started.ok()) {

@@ -304,15 +304,20 @@ void Ros2Ingest::OnPointCloud2(SensorState& sensor,
     Reject(sensor, ReasonOf(reject), detail);
     return;
   }
+  Deliver(sensor, msg.header, msg.width, msg.height, std::move(xyz), received_at);
+}
+
+void Ros2Ingest::Deliver(SensorState& sensor, const ros2::Header& header, std::uint32_t width,
+                         std::uint32_t height, std::vector<float> xyz,
+                         std::chrono::steady_clock::time_point received_at) {
   // With tf the points move from the message's frame into the sensor's (the mount's inverse).
   const Eigen::Isometry3d T_sensor_frame = sensor.config.mount.inverse(Eigen::Isometry);
   const bool move = options_.tf && !sensor.config.mount.isApprox(Eigen::Isometry3d::Identity());
-  Cloud cloud =
-      CloudFromRos2(sensor.config.sensor_id, sensor.sequence_number, msg.header.stamp.seconds(),
-                    Eigen::Isometry3d::Identity(), move ? &T_sensor_frame : nullptr, msg.width,
-                    msg.height, std::move(xyz));
+  Cloud cloud = CloudFromRos2(sensor.config.sensor_id, sensor.sequence_number,
+                              header.stamp.seconds(), Eigen::Isometry3d::Identity(),
+                              move ? &T_sensor_frame : nullptr, width, height, std::move(xyz));
   cloud.received_at = received_at;
-  Place(sensor, std::move(cloud), Ros2FrameId(msg.header.frame_id));
+  Place(sensor, std::move(cloud), Ros2FrameId(header.frame_id));
 }
 
 void Ros2Ingest::OnImage(SensorState& sensor, const sensor_msgs_msg_dds__Image_& sample) {
@@ -338,15 +343,8 @@ void Ros2Ingest::OnImage(SensorState& sensor, const sensor_msgs_msg_dds__Image_&
     Reject(sensor, ReasonOf(reject), detail);
     return;
   }
-  const Eigen::Isometry3d T_sensor_frame = sensor.config.mount.inverse(Eigen::Isometry);
-  const bool move = options_.tf && !sensor.config.mount.isApprox(Eigen::Isometry3d::Identity());
-  Cloud cloud =
-      CloudFromRos2(sensor.config.sensor_id, sensor.sequence_number, image.header.stamp.seconds(),
-                    Eigen::Isometry3d::Identity(), move ? &T_sensor_frame : nullptr,
-                    ros2::StridedSize(image.width, k.stride),
-                    ros2::StridedSize(image.height, k.stride), std::move(xyz));
-  cloud.received_at = received_at;
-  Place(sensor, std::move(cloud), Ros2FrameId(image.header.frame_id));
+  Deliver(sensor, image.header, ros2::StridedSize(image.width, k.stride),
+          ros2::StridedSize(image.height, k.stride), std::move(xyz), received_at);
 }
 
 TransformStatus Ros2Ingest::PoseOf(const std::string& frame_id, double stamp_s,

@@ -21,6 +21,7 @@
 #include "fusion/core/sensor.h"
 #include "fusion/core/status.h"
 #include "fusion/core/transform_buffer.h"
+#include "fusion/ros2/messages.h"
 #include "fusion/service/ingest_queues.h"
 #include "fusion/service/rejection_log.h"
 #include "fusion/service/validation.h"
@@ -107,6 +108,10 @@ class Ros2Ingest {
   void OnImage(SensorState& sensor, const sensor_msgs_msg_dds__Image_& sample);
   void OnCameraInfo(SensorState& sensor, const sensor_msgs_msg_dds__CameraInfo_& sample);
   void OnTf(const tf2_msgs_msg_dds__TFMessage_& sample, bool is_static);
+  // A converted message's points as a cloud of the sensor, handed to Place.
+  void Deliver(SensorState& sensor, const ros2::Header& header, std::uint32_t width,
+               std::uint32_t height, std::vector<float> xyz,
+               std::chrono::steady_clock::time_point received_at);
   // A converted message: queued at its pose, parked until its transform comes, or rejected.
   void Place(SensorState& sensor, Cloud cloud, const std::string& frame_id);
   // The parked clouds whose transform came are queued, the ones out of time rejected (all of
