@@ -9,6 +9,7 @@ if(FUSION_BUILD_FUZZERS)
     ${PROJECT_SOURCE_DIR}/service/src/config.cc
     ${PROJECT_SOURCE_DIR}/service/src/conversions.cc
     ${PROJECT_SOURCE_DIR}/service/src/persistence.cc
+    ${PROJECT_SOURCE_DIR}/service/src/ros2_config.cc
     ${PROJECT_SOURCE_DIR}/service/src/security.cc
     ${PROJECT_SOURCE_DIR}/service/src/validation.cc)
   target_include_directories(fusion_fuzz_service PUBLIC ${PROJECT_SOURCE_DIR}/service/include)
