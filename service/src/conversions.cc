@@ -58,8 +58,14 @@ Eigen::Isometry3d IsometryFromConfig(const fusion::v1::Transform& t) {
 
 namespace {
 
-// The sensor's geometry and noise: a preset's, or every field given.
-StatusOr<SensorSpec> BaseSpecFromConfig(const fusion::v1::SensorConfig& c) {
+// A pinhole block that gives the camera's intrinsics (not only a stride).
+bool GivesIntrinsics(const fusion::v1::PinholeConfig& p) {
+  return p.fx() != 0.0 || p.fy() != 0.0 || p.width() != 0 || p.height() != 0;
+}
+
+// The sensor's geometry and noise: a preset's, or every field given (a camera whose intrinsics
+// come from its CameraInfo has no geometry to give).
+StatusOr<SensorSpec> BaseSpecFromConfig(const fusion::v1::SensorConfig& c, bool from_camera_info) {
   if (!c.preset().empty()) {
     auto preset = SensorPreset(c.preset());
     if (!preset) {
@@ -69,7 +75,7 @@ StatusOr<SensorSpec> BaseSpecFromConfig(const fusion::v1::SensorConfig& c) {
     }
     return *preset;
   }
-  const bool angular = !c.has_pinhole();
+  const bool angular = !c.has_pinhole() && !from_camera_info;
   const char* missing = !c.has_r_min_m()                                       ? "r_min_m"
                         : !c.has_r_max_m()                                     ? "r_max_m"
                         : angular && !c.has_fov_h_deg() && !c.has_azimuth_min_deg() ? "fov_h_deg"
@@ -94,8 +100,7 @@ Status ApplyPinhole(const fusion::v1::PinholeConfig& p, SensorSpec* spec) {
     return Status::Error("pinhole: width, height and stride must be at most 65536");
   }
   PinholeIntrinsics k;
-  const bool full = p.fx() != 0.0 || p.fy() != 0.0 || p.width() != 0 || p.height() != 0;
-  if (full) {
+  if (GivesIntrinsics(p)) {
     k = {p.fx(), p.fy(), p.cx(), p.cy(), static_cast<int>(p.width()),
          static_cast<int>(p.height()), 1};
   } else if (spec->pinhole) {
@@ -109,9 +114,31 @@ Status ApplyPinhole(const fusion::v1::PinholeConfig& p, SensorSpec* spec) {
   return Status::Ok();
 }
 
+// The intrinsics a camera waiting for its CameraInfo is checked with: the other fields must
+// make a valid spec with some camera (ValidateSensorSpec); its beams come later
+// (SpecFromCameraInfo).
+constexpr PinholeIntrinsics kNominalCamera{1.0, 1.0, 0.0, 0.0, 1, 1, 1};
+
+// A depth_image sensor without configured intrinsics: no angular fields, at most a stride.
+Status ApplyCameraInfoGeometry(const fusion::v1::SensorConfig& c, bool angular,
+                               SensorSpec* spec) {
+  if (angular) {
+    return Status::Error("pinhole: a depth image's beams are its pixels (from its CameraInfo, "
+                         "or a pinhole block); the angular fields (fov_*, azimuth / elevation "
+                         "limits, cols, rows) do not apply");
+  }
+  PinholeIntrinsics k = kNominalCamera;
+  if (c.pinhole().stride() > (1u << 16)) {
+    return Status::Error("pinhole: width, height and stride must be at most 65536");
+  }
+  k.stride = static_cast<int>(std::max<std::uint32_t>(1, c.pinhole().stride()));
+  SetPinhole(k, spec);
+  return Status::Ok();
+}
+
 // The angular field of view and beams the file sets: symmetric widths or the limits of an
 // asymmetric one, cols and rows; a pinhole block instead of all of them.
-Status ApplyGeometry(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
+Status ApplyGeometry(const fusion::v1::SensorConfig& c, bool from_camera_info, SensorSpec* spec) {
   const bool az = c.has_azimuth_min_deg() || c.has_azimuth_max_deg();
   const bool el = c.has_elevation_min_deg() || c.has_elevation_max_deg();
   if (az && !(c.has_azimuth_min_deg() && c.has_azimuth_max_deg())) {
@@ -128,6 +155,7 @@ Status ApplyGeometry(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
   }
   const bool h = az || c.has_fov_h_deg(), v = el || c.has_fov_v_deg();
   const bool angular = h || v || c.has_cols() || c.has_rows();
+  if (from_camera_info) return ApplyCameraInfoGeometry(c, angular, spec);
   if (c.has_pinhole()) {
     if (angular) {
       return Status::Error("pinhole: a camera's beams follow from its intrinsics; give pinhole or "
@@ -164,28 +192,14 @@ Status ApplyGeometry(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
   return Status::Ok();
 }
 
-// The fields the file sets over the base spec, then core's checks, named as the file's fields.
-Status ApplySpecFields(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
-  if (spec->name.empty()) spec->name = c.id();
-  if (c.model() == "classic_beam") {
-    spec->model = ForwardModelKind::kClassicBeam;
-  } else if (c.model() == "paper3d") {
-    spec->model = ForwardModelKind::kPaper3d;
-  } else if (!c.model().empty()) {
-    return Status::Error("model: '" + c.model() + "' is not paper3d or classic_beam");
-  }
-  if (c.has_r_min_m()) spec->r_min_m = c.r_min_m();
-  if (c.has_r_max_m()) spec->r_max_m = c.r_max_m();
-  if (Status s = ApplyGeometry(c, spec); !s.ok()) return s;
-  if (c.has_q_mu()) spec->q_mu = PolynomialFromConfig(c.q_mu());
-  if (c.has_q_sigma()) spec->q_sigma = PolynomialFromConfig(c.q_sigma());
-  if (c.has_epsilon()) spec->epsilon = c.epsilon();
-  const long long beams = static_cast<long long>(spec->cols) * spec->rows;
+// Core's checks on a spec and a bound on its beams, named as the file's fields.
+Status CheckSpec(const fusion::v1::SensorConfig& c, const SensorSpec& spec) {
+  const long long beams = static_cast<long long>(spec.cols) * spec.rows;
   if (beams > 4'000'000) {
     return Status::Error("cols: cols * rows = " + std::to_string(beams) +
                          " beams is more than 4000000");
   }
-  const std::string spec_error = ValidateSensorSpec(*spec);
+  const std::string spec_error = ValidateSensorSpec(spec);
   if (spec_error.empty()) return Status::Ok();
   // Name the configuration field, not core's: degrees in the file, radians in core.
   std::string field = spec_error.substr(0, spec_error.find(' '));
@@ -196,6 +210,36 @@ Status ApplySpecFields(const fusion::v1::SensorConfig& c, SensorSpec* spec) {
     field = c.has_elevation_min_deg() ? "elevation_min_deg" : "fov_v_deg";
   }
   return Status::Error(field + ": " + spec_error);
+}
+
+// The fields the file sets over the base spec, then core's checks, named as the file's fields.
+Status ApplySpecFields(const fusion::v1::SensorConfig& c, bool from_camera_info,
+                       SensorSpec* spec) {
+  if (spec->name.empty()) spec->name = c.id();
+  if (c.model() == "classic_beam") {
+    spec->model = ForwardModelKind::kClassicBeam;
+  } else if (c.model() == "paper3d") {
+    spec->model = ForwardModelKind::kPaper3d;
+  } else if (!c.model().empty()) {
+    return Status::Error("model: '" + c.model() + "' is not paper3d or classic_beam");
+  }
+  if (c.has_r_min_m()) spec->r_min_m = c.r_min_m();
+  if (c.has_r_max_m()) spec->r_max_m = c.r_max_m();
+  if (Status s = ApplyGeometry(c, from_camera_info, spec); !s.ok()) return s;
+  if (c.has_q_mu()) spec->q_mu = PolynomialFromConfig(c.q_mu());
+  if (c.has_q_sigma()) spec->q_sigma = PolynomialFromConfig(c.q_sigma());
+  if (c.has_epsilon()) spec->epsilon = c.epsilon();
+  return CheckSpec(c, *spec);
+}
+
+// A camera waiting for its CameraInfo keeps its stride and no beams (cols = rows = 0).
+void AwaitCameraInfo(SensorSetup* setup) {
+  setup->intrinsics_from_camera_info = true;
+  setup->camera_stride = setup->spec.pinhole->stride;
+  setup->spec.pinhole.reset();
+  setup->spec.cols = setup->spec.rows = 0;
+  setup->spec.fov_h_rad = setup->spec.fov_v_rad = 0.0;
+  setup->spec.azimuth_centre_rad = setup->spec.elevation_centre_rad = 0.0;
 }
 
 // The mount and the queue: what the service adds to core's spec.
@@ -222,15 +266,40 @@ Status ApplyServiceFields(const fusion::v1::SensorConfig& c, SensorSetup* setup)
 
 StatusOr<SensorSetup> SensorSetupFromConfig(const fusion::v1::SensorConfig& c) {
   if (c.id().empty()) return Status::Error("id: must not be empty");
-  auto spec = BaseSpecFromConfig(c);
+  const std::optional<SensorSpec> preset = SensorPreset(c.preset());
+  // A depth image without intrinsics in the file or its preset: they come from its CameraInfo.
+  const bool from_camera_info = c.ros2_type() == "depth_image" && !GivesIntrinsics(c.pinhole()) &&
+                                !(preset && preset->pinhole);
+  auto spec = BaseSpecFromConfig(c, from_camera_info);
   if (!spec.ok()) return spec.status();
   SensorSetup setup;
   setup.id = c.id();
   setup.preset = c.preset();
   setup.spec = std::move(*spec);
-  if (Status s = ApplySpecFields(c, &setup.spec); !s.ok()) return s;
+  if (Status s = ApplySpecFields(c, from_camera_info, &setup.spec); !s.ok()) return s;
   if (Status s = ApplyServiceFields(c, &setup); !s.ok()) return s;
+  if (from_camera_info) AwaitCameraInfo(&setup);
   return setup;
+}
+
+StatusOr<SensorSpec> SpecFromCameraInfo(const SensorSetup& setup, const ros2::CameraInfo& info) {
+  fusion::v1::PinholeConfig pinhole;
+  pinhole.set_fx(info.k[0]);
+  pinhole.set_fy(info.k[4]);
+  pinhole.set_cx(info.k[2]);
+  pinhole.set_cy(info.k[5]);
+  pinhole.set_width(info.width);
+  pinhole.set_height(info.height);
+  pinhole.set_stride(static_cast<std::uint32_t>(setup.camera_stride));
+  SensorSpec spec = setup.spec;
+  if (!GivesIntrinsics(pinhole)) {
+    return Status::Error("CameraInfo: K and the image size are all zero (an uncalibrated camera)");
+  }
+  if (Status s = ApplyPinhole(pinhole, &spec); !s.ok()) return s.WithContext("CameraInfo");
+  if (Status s = CheckSpec(fusion::v1::SensorConfig(), spec); !s.ok()) {
+    return s.WithContext("CameraInfo");
+  }
+  return spec;
 }
 
 StatusOr<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig& c) {

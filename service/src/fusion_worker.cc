@@ -17,6 +17,7 @@ struct FusionWorker::Lane {
   const SensorSetup* setup = nullptr;
   SensorCountersAtomic* counters = nullptr;
   mutable std::mutex mutex;  // guards periods (the integrator, a render of the open period)
+  // Null for a camera that waits for its CameraInfo (DefineSensor makes it).
   std::unique_ptr<SensorPeriods> periods;
   // Arrival times of the integrated clouds not yet in a published map, oldest first (only
   // with the DDS-to-queryable histogram).
@@ -85,22 +86,52 @@ Status FusionWorker::StartLocked(std::unique_ptr<octomap::OcTree> history) {
   map_options.occupancy_threshold = options_.thresholds.occupied;
   map_ = std::make_unique<WorldMap>(map_options);
   for (const auto& sensor : sensors_) {
-    const MapStatus status = map_->AddSensor(sensor.id, sensor.spec);
-    if (status != MapStatus::kOk) {
-      return Status::Error("sensor '" + sensor.id + "': " + MapStatusName(status));
-    }
     auto lane = std::make_unique<Lane>();
     lane->setup = &sensor;
     lane->counters = queues_->counters(sensor.id);
-    lane->periods = std::make_unique<SensorPeriods>(sensor.spec, SensorGridOptions(options_.map),
-                                                    options_.map.pose_tolerance_m,
-                                                    options_.map.pose_tolerance_rad,
-                                                    options_.map.resolution_m);
+    // A camera whose intrinsics come from its CameraInfo gets its beam grid then (DefineSensor).
+    if (!sensor.intrinsics_from_camera_info) {
+      if (Status added = AddBeamGridLocked(*lane, sensor.spec); !added.ok()) return added;
+    }
     lanes_.push_back(std::move(lane));
   }
   if (history) map_->LoadHistory(*history);
   PublishLocked();
   return Status::Ok();
+}
+
+Status FusionWorker::AddBeamGridLocked(Lane& lane, const SensorSpec& spec) {
+  const std::string& id = lane.setup->id;
+  const MapStatus status = map_->AddSensor(id, spec);
+  if (status != MapStatus::kOk) return Status::Error("sensor '" + id + "': " + MapStatusName(status));
+  auto periods = std::make_unique<SensorPeriods>(spec, SensorGridOptions(options_.map),
+                                                 options_.map.pose_tolerance_m,
+                                                 options_.map.pose_tolerance_rad,
+                                                 options_.map.resolution_m);
+  std::lock_guard<std::mutex> lock(lane.mutex);
+  lane.periods = std::move(periods);
+  return Status::Ok();
+}
+
+Status FusionWorker::DefineSensor(const std::string& sensor_id, const SensorSpec& spec) {
+  std::lock_guard<std::mutex> lock(map_mutex_);
+  Lane* lane = LaneOf(sensor_id);
+  if (lane == nullptr || !lane->setup->intrinsics_from_camera_info) {
+    return Status::Error("sensor '" + sensor_id + "' does not wait for its intrinsics");
+  }
+  if (map_->HasSensor(sensor_id)) return Status::Error("sensor '" + sensor_id + "' has its beams");
+  try {
+    return AddBeamGridLocked(*lane, spec);
+  } catch (const std::exception& e) {  // core refuses what validation let through
+    return Status::Error("sensor '" + sensor_id + "': " + e.what());
+  }
+}
+
+std::optional<SensorSpec> FusionWorker::SpecOf(const std::string& sensor_id) const {
+  const Lane* lane = LaneOf(sensor_id);
+  if (lane == nullptr) return std::nullopt;
+  std::lock_guard<std::mutex> lock(lane->mutex);
+  return lane->periods ? lane->periods->spec() : lane->setup->spec;
 }
 
 void FusionWorker::Stop() {
@@ -164,6 +195,12 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   MapStatus status = MapStatus::kInvalidArgument;
   {
     std::lock_guard<std::mutex> lock(lane->mutex);
+    if (!lane->periods) {  // only a fusion/points cloud can come before the CameraInfo
+      spdlog::warn("worker: cloud {} of '{}' not integrated: the sensor has no beams before its "
+                   "first CameraInfo",
+                   cloud.sequence_number, cloud.sensor_id);
+      return;
+    }
     const auto start = options_.histograms.integration_seconds ? Clock::now() : Clock::time_point{};
     try {
       status = lane->periods->Integrate(T_world_sensor, cloud.xyz.data(), cloud.xyz.size() / 3,
@@ -425,7 +462,7 @@ std::uint64_t FusionWorker::Reset() {
   std::lock_guard<std::mutex> lock(map_mutex_);
   for (const auto& lane : lanes_) {
     std::lock_guard<std::mutex> lane_lock(lane->mutex);
-    lane->periods->Reset();
+    if (lane->periods) lane->periods->Reset();
     lane->live_sequence = lane->live_frames = lane->committed_clouds = 0;
     lane->published_clouds = 0;
     lane->awaiting_publication.clear();
@@ -452,7 +489,7 @@ std::uint64_t FusionWorker::ClearBox(const Eigen::AlignedBox3d& box_world,
     std::unique_ptr<Period> open;
     {
       std::lock_guard<std::mutex> lane_lock(lane->mutex);
-      open = lane->periods->Seal();
+      if (lane->periods) open = lane->periods->Seal();
     }
     if (!open) continue;
     std::lock_guard<std::mutex> work(work_mutex_);
@@ -482,6 +519,7 @@ BeamLookup FusionWorker::InspectBeam(const std::string& sensor_id, std::optional
   const Lane* lane = LaneOf(sensor_id);
   if (lane == nullptr) return BeamLookup::kUnknownSensor;
   std::lock_guard<std::mutex> lock(lane->mutex);
+  if (!lane->periods) return BeamLookup::kBeamOutOfRange;  // no beams before its CameraInfo
   const BeamGrid& grid = *lane->periods->open().grid;
   const BeamTessellation& tess = grid.tessellation();
   if (!beam) {

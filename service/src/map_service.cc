@@ -199,14 +199,17 @@ grpc::ServerUnaryReactor* MapService::ListSensors(grpc::CallbackServerContext* c
   return Unary(context, state_, "ListSensors", [&] {
     for (const auto& sensor : state_->sensors) {
       const auto* c = state_->queues->counters(sensor.id);
+      // A camera's beams may come with its first CameraInfo: the worker's spec has them.
+      const SensorSpec spec =
+          state_->worker ? state_->worker->SpecOf(sensor.id).value_or(sensor.spec) : sensor.spec;
       auto* info = reply->add_sensors();
       info->set_id(sensor.id);
       info->set_preset(sensor.preset);
-      info->set_cols(sensor.spec.cols);
-      info->set_rows(sensor.spec.rows);
-      info->set_beams(sensor.spec.cols * sensor.spec.rows);
+      info->set_cols(spec.cols);
+      info->set_rows(spec.rows);
+      info->set_beams(spec.cols * spec.rows);
       info->set_cells_per_beam(
-          CellsPerBeam(sensor.spec.r_max_m, state_->config.map().beam_cell_size_m()));
+          CellsPerBeam(spec.r_max_m, state_->config.map().beam_cell_size_m()));
       info->set_memory_bytes(c->memory_bytes);
       auto* out = info->mutable_counters();
       out->set_received(c->received + c->rejected.Total());

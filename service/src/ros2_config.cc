@@ -43,12 +43,9 @@ StatusOr<std::optional<Ros2Sensor>> Ros2SensorFromConfig(const fusion::v1::Senso
   if (!setup.ok()) return setup.status();
   sensor.mount = setup->T_published_sensor;
   if (sensor.depth_image) {
-    if (!setup->spec.pinhole) {
-      return Status::Error(
-          "ros2_type: depth_image needs the camera's intrinsics: a pinhole block "
-          "or a pinhole preset (kinect_v1)");
-    }
+    // Unset when the intrinsics come from the first CameraInfo (SensorSetupFromConfig).
     sensor.pinhole = setup->spec.pinhole;
+    sensor.setup = *setup;
     sensor.camera_info_topic = c.ros2_camera_info_topic().empty()
                                    ? DefaultCameraInfoTopic(c.ros2_topic())
                                    : c.ros2_camera_info_topic();

@@ -107,12 +107,16 @@ void OnWritersMatched(dds_entity_t, const dds_subscription_matched_status_t stat
 
 }  // namespace
 
-Ros2Ingest::Ros2Ingest(IngestQueues* queues, Ros2IngestOptions options)
+Ros2Ingest::Ros2Ingest(IngestQueues* queues, Ros2IngestOptions options, DefineSensor define_sensor)
     : queues_(queues),
       options_(std::move(options)),
+      define_sensor_(std::move(define_sensor)),
       tf_(options_.tf_history_s),
       log_(options_.log_interval) {
-  for (const Ros2Sensor& s : options_.sensors) sensors_.push_back({s, 0, "", {}});
+  for (const Ros2Sensor& s : options_.sensors) {
+    const std::string waiting = "no CameraInfo on '" + s.camera_info_topic + "' yet";
+    sensors_.push_back({s, 0, "", s.depth_image ? waiting : "", {}});
+  }
 }
 
 Ros2Ingest::~Ros2Ingest() { Stop(); }
@@ -279,7 +283,12 @@ void Ros2Ingest::OnTf(const tf2_msgs_msg_dds__TFMessage_& sample, bool is_static
 }
 
 void Ros2Ingest::OnCameraInfo(SensorState& sensor, const sensor_msgs_msg_dds__CameraInfo_& sample) {
-  const std::string mismatch = CameraInfoMismatch(Ros2FromDds(sample), *sensor.config.pinhole);
+  const ros2::CameraInfo info = Ros2FromDds(sample);
+  if (!sensor.config.pinhole) {
+    TakeIntrinsics(sensor, info);
+    return;
+  }
+  const std::string mismatch = CameraInfoMismatch(info, *sensor.config.pinhole);
   if (mismatch != sensor.camera_info_mismatch) {
     if (mismatch.empty()) {
       spdlog::info("ros2: sensor '{}': CameraInfo agrees with the configured intrinsics again",
@@ -290,6 +299,31 @@ void Ros2Ingest::OnCameraInfo(SensorState& sensor, const sensor_msgs_msg_dds__Ca
     }
   }
   sensor.camera_info_mismatch = mismatch;
+}
+
+void Ros2Ingest::TakeIntrinsics(SensorState& sensor, const ros2::CameraInfo& info) {
+  const std::string& id = sensor.config.sensor_id;
+  const auto spec = SpecFromCameraInfo(sensor.config.setup, info);
+  Status defined = spec.ok() ? Status::Ok() : spec.status();
+  if (defined.ok()) {
+    defined = define_sensor_ ? define_sensor_(id, *spec) : Status::Error("no worker to tell");
+  }
+  if (!defined.ok()) {
+    const std::string problem = "the CameraInfo received makes no camera: " + defined.message();
+    if (problem != sensor.no_camera_info) {
+      spdlog::warn("ros2: sensor '{}': {}; its images are rejected until one does",
+                   LoggableText(id), problem);
+    }
+    sensor.no_camera_info = problem;
+    return;
+  }
+  const PinholeIntrinsics& k = *spec->pinhole;
+  sensor.config.pinhole = k;
+  sensor.no_camera_info.clear();
+  spdlog::info("ros2: sensor '{}': intrinsics from its CameraInfo: fx {} fy {} cx {} cy {} px, "
+               "{} x {} pixels, stride {}: {} x {} beams",
+               LoggableText(id), k.fx_px, k.fy_px, k.cx_px, k.cy_px, k.width_px, k.height_px,
+               k.stride, spec->cols, spec->rows);
 }
 
 void Ros2Ingest::OnPointCloud2(SensorState& sensor,
@@ -323,13 +357,17 @@ void Ros2Ingest::Deliver(SensorState& sensor, const ros2::Header& header, std::u
 void Ros2Ingest::OnImage(SensorState& sensor, const sensor_msgs_msg_dds__Image_& sample) {
   const auto received_at = std::chrono::steady_clock::now();
   ++sensor.sequence_number;
+  if (!sensor.config.pinhole) {
+    Reject(sensor, RejectReason::kNoCameraInfo, sensor.no_camera_info);
+    return;
+  }
   if (!sensor.camera_info_mismatch.empty()) {
     Reject(sensor, RejectReason::kCameraInfoMismatch, sensor.camera_info_mismatch);
     return;
   }
   const ros2::Image image = Ros2FromDds(sample);
-  // The configured intrinsics are the camera's (its beam grid is built from them); a
-  // CameraInfo is only checked against them.
+  // The sensor's intrinsics (configured, or its first CameraInfo's) are the camera's: its beam
+  // grid is built from them; every CameraInfo is checked against them.
   const PinholeIntrinsics& k = *sensor.config.pinhole;
   ros2::CameraInfo info;
   info.width = static_cast<std::uint32_t>(k.width_px);

@@ -44,6 +44,8 @@ const char* RejectReasonName(RejectReason reason) {
       return "camera_info";
     case RejectReason::kCameraInfoMismatch:
       return "camera_info_mismatch";
+    case RejectReason::kNoCameraInfo:
+      return "no_camera_info";
     case RejectReason::kNoTransform:
       return "no_transform";
     case RejectReason::kTransformTooOld:

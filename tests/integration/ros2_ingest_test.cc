@@ -247,6 +247,86 @@ TEST_F(Ros2IngestTest, DepthImagesMapTheBoard) {
   ExpectBoardMapped();
 }
 
+// A depth camera configured without intrinsics: its beams are its first CameraInfo's pixels
+// (at the configured stride 2: 40 x 30 beams). An image before any CameraInfo is rejected as
+// no_camera_info; images after it map the board; a CameraInfo that disagrees later is refused
+// as with configured intrinsics.
+TEST_F(Ros2IngestTest, DepthImagesTakeTheirIntrinsicsFromTheFirstCameraInfo) {
+  Start(BaseConfig() + "ros2 { tf: false }\n" +
+        "sensors { id: \"auto\" r_min_m: 0.3 r_max_m: 4 q_mu { a1: 1 } q_sigma { a0: 0.01 } "
+        "pinhole { stride: 2 } " +
+        MountBlock(OpticalAxes()) +
+        " ros2_topic: \"rt/auto/depth/image_raw\" ros2_type: \"depth_image\""
+        " ros2_reliable: true }\n");
+  const auto beams = [&] {
+    grpc::ClientContext context;
+    SetDeadline(&context, 5s);
+    v1::ListSensorsResponse reply;
+    EXPECT_TRUE(stub_->ListSensors(&context, v1::ListSensorsRequest(), &reply).ok());
+    return reply.sensors_size() == 1 ? reply.sensors(0) : v1::SensorInfo();
+  };
+  EXPECT_EQ(beams().beams(), 0u) << "no beams before a CameraInfo";
+  FastDdsRos2 dds(domain_);
+  ASSERT_TRUE(dds.ok());
+  auto* info =
+      dds.Writer<sm::CameraInfo_PubSubType>("rt/auto/depth/camera_info", Ros2Qos::kReliable);
+  auto* image = dds.Writer<sm::Image_PubSubType>("rt/auto/depth/image_raw", Ros2Qos::kReliable);
+  for (auto* w : {info, image}) ASSERT_TRUE(FastDdsRos2::WaitForReader(w, 10s));
+  ASSERT_TRUE(WaitForMatch("rt/auto/depth/camera_info") &&
+              WaitForMatch("rt/auto/depth/image_raw"));
+
+  auto early = BoardDepthImage("16UC1", "auto_optical", 1.0);
+  ASSERT_TRUE(FastDdsRos2::Publish(image, early));
+  ASSERT_TRUE(WaitCounters("auto", [](const auto& c) { return c.rejected() == 1; }))
+      << Counters("auto").DebugString();
+  EXPECT_EQ(Reason(Counters("auto"), "no_camera_info"), 1u);
+
+  auto camera_info = CameraInfo("auto_optical", kFocalPx);
+  ASSERT_TRUE(FastDdsRos2::Publish(info, camera_info));
+  // The CameraInfo and the images come on two topics: wait for the beams before the images.
+  const auto end = std::chrono::steady_clock::now() + 10s;
+  while (beams().beams() == 0 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(10ms);
+  }
+  const v1::SensorInfo sensor = beams();
+  EXPECT_EQ(sensor.cols(), kImageWidth / 2);
+  EXPECT_EQ(sensor.rows(), kImageHeight / 2);
+  constexpr std::uint64_t kImages = 4;
+  for (std::uint64_t k = 0; k < kImages; ++k) {
+    auto depth = BoardDepthImage("16UC1", "auto_optical", 2.0 + 0.1 * k);
+    ASSERT_TRUE(FastDdsRos2::Publish(image, depth));
+  }
+  ASSERT_TRUE(WaitInMap(kImages, 20s)) << "clouds in map: " << Stats().clouds_in_map() << "\n"
+                                       << Counters("auto").DebugString() << Log();
+  auto c = Counters("auto");
+  EXPECT_EQ(c.received(), kImages + 1);
+  EXPECT_EQ(c.integrated(), kImages);
+  EXPECT_EQ(c.rejected(), 1u);
+  EXPECT_GT(c.points_updated(), 0u);
+  ExpectBoardMapped();
+  EXPECT_NE(Log().find("intrinsics from its CameraInfo: fx 60 fy 60 cx 39.5 cy 29.5 px, 80 x 60 "
+                       "pixels, stride 2: 40 x 30 beams"),
+            std::string::npos)
+      << Log();
+
+  // A later CameraInfo that disagrees: the images are refused until one agrees again.
+  auto other = CameraInfo("auto_optical", 2 * kFocalPx);
+  ASSERT_TRUE(FastDdsRos2::Publish(info, other));
+  const std::regex refused("CameraInfo K .* disagrees");
+  const auto log_end = std::chrono::steady_clock::now() + 10s;
+  while (!std::regex_search(Log(), refused) && std::chrono::steady_clock::now() < log_end) {
+    std::this_thread::sleep_for(10ms);
+  }
+  auto after = BoardDepthImage("16UC1", "auto_optical", 3.0);
+  ASSERT_TRUE(FastDdsRos2::Publish(image, after));
+  EXPECT_TRUE(WaitCounters("auto", [](const auto& c) { return c.rejected() == 2; }))
+      << Counters("auto").DebugString();
+  c = Counters("auto");
+  EXPECT_EQ(Reason(c, "camera_info_mismatch"), 1u);
+  EXPECT_EQ(Reason(c, "no_camera_info"), 1u);
+  EXPECT_EQ(beams().beams(), static_cast<std::uint32_t>(kImageWidth / 2 * kImageHeight / 2));
+}
+
 // A full-size Kinect depth image (640 x 480 16UC1, 600 kB: many DDS fragments) with the
 // kinect_v1 preset's intrinsics at a stride of 8, before any CameraInfo came.
 TEST_F(Ros2IngestTest, FullSizeDepthImagesArriveInFragments) {

@@ -61,6 +61,69 @@ TEST(Ros2IngestConfig, DefaultsAndFields) {
   EXPECT_DOUBLE_EQ(set->tf_history_s, 30.0);
 }
 
+// A depth_image sensor without intrinsics (no pinhole block with them, no pinhole preset) is
+// valid: its beams wait for its first CameraInfo, at the configured stride; the rest of the
+// sensor is checked as always.
+TEST(Ros2IngestConfig, DepthImageWithoutIntrinsicsTakesThemFromCameraInfo) {
+  const std::string forward_model = "r_min_m: 0.3 r_max_m: 4 q_mu { a1: 1 } q_sigma { a0: 0.01 } ";
+  const std::string sensor = "sensors { id: \"cam\" " + forward_model +
+                             "pinhole { stride: 4 } ros2_topic: \"rt/cam/depth/image_raw\" "
+                             "ros2_type: \"depth_image\" }";
+  EXPECT_EQ(Error(sensor), "");
+  EXPECT_EQ(Error("sensors { id: \"sr\" preset: \"sr3000\" ros2_topic: \"rt/d\" ros2_type: "
+                  "\"depth_image\" }"),
+            "");  // sr3000's forward model, the CameraInfo's pixels
+  EXPECT_NE(Error("sensors { id: \"cam\" r_min_m: 0.3 r_max_m: 4 q_sigma { a0: 0.01 } "
+                  "ros2_topic: \"rt/d\" ros2_type: \"depth_image\" }")
+                .find("sensors[0].q_mu: required"),
+            std::string::npos);
+  EXPECT_NE(Error("sensors { id: \"cam\" r_min_m: 5 r_max_m: 4 q_mu { a1: 1 } q_sigma { a0: "
+                  "0.01 } ros2_topic: \"rt/d\" ros2_type: \"depth_image\" }")
+                .find("sensors[0].r_max_m: "),
+            std::string::npos);
+  // Without ros2_type depth_image the same sensor still needs its geometry.
+  EXPECT_NE(Error("sensors { id: \"cam\" " + forward_model + "}").find("sensors[0].fov_h_deg: "),
+            std::string::npos);
+
+  const auto setup = SensorSetupFromConfig(Parse(sensor).sensors(0));
+  ASSERT_TRUE(setup.ok()) << setup.status().message();
+  EXPECT_TRUE(setup->intrinsics_from_camera_info);
+  EXPECT_EQ(setup->camera_stride, 4);
+  EXPECT_FALSE(setup->spec.pinhole.has_value());
+  EXPECT_EQ(setup->spec.cols * setup->spec.rows, 0);
+  const auto options = Ros2IngestOptionsFromConfig(Parse(sensor));
+  ASSERT_TRUE(options.ok()) << options.status().message();
+  EXPECT_FALSE(options->sensors[0].pinhole.has_value());
+
+  ros2::CameraInfo info;
+  info.width = 80;
+  info.height = 60;
+  info.k = {60.0, 0.0, 39.5, 0.0, 61.0, 29.5, 0.0, 0.0, 1.0};
+  const auto spec = SpecFromCameraInfo(*setup, info);
+  ASSERT_TRUE(spec.ok()) << spec.status().message();
+  ASSERT_TRUE(spec->pinhole.has_value());
+  EXPECT_DOUBLE_EQ(spec->pinhole->fx_px, 60.0);
+  EXPECT_DOUBLE_EQ(spec->pinhole->fy_px, 61.0);
+  EXPECT_DOUBLE_EQ(spec->pinhole->cx_px, 39.5);
+  EXPECT_DOUBLE_EQ(spec->pinhole->cy_px, 29.5);
+  EXPECT_EQ(spec->pinhole->stride, 4);
+  EXPECT_EQ(spec->cols, 20);  // ceil(80 / 4)
+  EXPECT_EQ(spec->rows, 15);
+  EXPECT_DOUBLE_EQ(spec->r_max_m, 4.0);
+  // A CameraInfo that makes no camera is refused, by the pinhole block's rules.
+  ros2::CameraInfo zero;
+  EXPECT_NE(SpecFromCameraInfo(*setup, zero).status().message().find("CameraInfo: "),
+            std::string::npos);
+  ros2::CameraInfo huge = info;
+  huge.width = 100000;
+  EXPECT_NE(SpecFromCameraInfo(*setup, huge).status().message().find("at most 65536"),
+            std::string::npos);
+  ros2::CameraInfo no_focal = info;
+  no_focal.k[0] = 0.0;
+  EXPECT_NE(SpecFromCameraInfo(*setup, no_focal).status().message().find("focal lengths"),
+            std::string::npos);
+}
+
 TEST(Ros2IngestConfig, CameraInfoTopicIsTheImagesSibling) {
   EXPECT_EQ(DefaultCameraInfoTopic("rt/camera/depth/image_raw"), "rt/camera/depth/camera_info");
   EXPECT_EQ(DefaultCameraInfoTopic("rt/depth"), "rt/camera_info");
@@ -79,10 +142,10 @@ TEST(Ros2IngestConfig, BadFieldsAreNamed) {
   EXPECT_NE(Error("sensors { id: \"a\" preset: \"sr3000\" ros2_topic: \"rt/p\" ros2_type: \"x\" }")
                 .find("sensors[0].ros2_type: 'x' is not point_cloud2 or depth_image"),
             std::string::npos);
-  // A depth image needs intrinsics: sr3000 is an angular grid.
-  EXPECT_NE(Error("sensors { id: \"a\" preset: \"sr3000\" ros2_topic: \"rt/d\" ros2_type: "
-                  "\"depth_image\" }")
-                .find("sensors[0].ros2_type: depth_image needs the camera's intrinsics"),
+  // A depth image's beams are its pixels: angular fields do not apply to one.
+  EXPECT_NE(Error("sensors { id: \"a\" preset: \"sr3000\" fov_h_deg: 40 fov_v_deg: 30 cols: 4 "
+                  "rows: 3 ros2_topic: \"rt/d\" ros2_type: \"depth_image\" }")
+                .find("sensors[0].pinhole: a depth image's beams are its pixels"),
             std::string::npos);
   EXPECT_NE(Error("sensors { id: \"a\" preset: \"sr3000\" ros2_topic: \"rt/p\" "
                   "ros2_camera_info_topic: \"rt/c\" }")

@@ -35,6 +35,11 @@ struct SensorSetup {
   // Clouds that arrive while a render runs (~0.3 s for an SR-3000 at 2 cm) wait here: at
   // 30 Hz that is ~10; a queue of 2 dropped a third of them (BENCHMARKS.md).
   std::size_t queue_depth = 16;
+  // A depth_image sensor configured without intrinsics (neither a pinhole preset nor a pinhole
+  // block that gives them): its beams are the pixels of the first CameraInfo it receives, at
+  // camera_stride (SpecFromCameraInfo); until then spec has no beams (cols = rows = 0).
+  bool intrinsics_from_camera_info = false;
+  int camera_stride = 1;
 };
 
 // Thresholds that turn an occupancy probability into a state.
@@ -46,6 +51,11 @@ struct StateThresholds {
 
 // Config -> core. An error names the field (relative to the message).
 [[nodiscard]] StatusOr<SensorSetup> SensorSetupFromConfig(const fusion::v1::SensorConfig& c);
+// The spec of a sensor whose intrinsics come from its CameraInfo (intrinsics_from_camera_info):
+// one beam per pixel (or per camera_stride pixels) of the image K describes (fx = K[0],
+// fy = K[4], cx = K[2], cy = K[5], width x height), checked as a configured pinhole block is.
+[[nodiscard]] StatusOr<SensorSpec> SpecFromCameraInfo(const SensorSetup& setup,
+                                                      const ros2::CameraInfo& info);
 [[nodiscard]] StatusOr<WorldMapOptions> WorldMapOptionsFromConfig(const fusion::v1::MapConfig& c);
 [[nodiscard]] StateThresholds ThresholdsFromConfig(const fusion::v1::MapConfig& c);
 // A transform whose quaternion is all zero is the identity.

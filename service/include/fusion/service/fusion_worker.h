@@ -88,6 +88,12 @@ class FusionWorker {
   // Clouds integrated meanwhile start new periods. Sets *voxels to the voxels forgotten; returns
   // the new version.
   std::uint64_t ClearBox(const Eigen::AlignedBox3d& box_world, std::uint64_t* voxels);
+  // A camera configured without intrinsics (SensorSetup::intrinsics_from_camera_info) gets its
+  // beams: `spec` (SpecFromCameraInfo) makes its beam grid, and its clouds integrate from then
+  // on (before, they are not integrated). An error when the sensor does not wait for them.
+  [[nodiscard]] Status DefineSensor(const std::string& sensor_id, const SensorSpec& spec);
+  // The sensor's spec as its beam grid has it (a waiting camera's: without beams).
+  [[nodiscard]] std::optional<SensorSpec> SpecOf(const std::string& sensor_id) const;
   // beam: an index, or row/col when std::nullopt. The open period's beam grid.
   BeamLookup InspectBeam(const std::string& sensor_id, std::optional<std::size_t> beam,
                          std::size_t row, std::size_t col, BeamInspection* out) const;
@@ -106,6 +112,8 @@ class FusionWorker {
 
   // Start's part under map_mutex_: the map, the sensors' lanes, the first publication.
   [[nodiscard]] Status StartLocked(std::unique_ptr<octomap::OcTree> history);
+  // Under map_mutex_: the sensor in the map and its periods' beam grid.
+  [[nodiscard]] Status AddBeamGridLocked(Lane& lane, const SensorSpec& spec);
   void IntegratorLoop();
   void RendererLoop();
   void Integrate(const Cloud& cloud);

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <optional>
 #include <string>
 #include <thread>
@@ -22,6 +23,7 @@
 #include "fusion/core/status.h"
 #include "fusion/core/transform_buffer.h"
 #include "fusion/ros2/messages.h"
+#include "fusion/service/conversions.h"
 #include "fusion/service/ingest_queues.h"
 #include "fusion/service/rejection_log.h"
 #include "fusion/service/validation.h"
@@ -41,7 +43,10 @@ struct Ros2Sensor {
   // The sensor's mount: with tf, T_frame_sensor (message frame -> sensor frame); without tf,
   // the sensor's fixed pose in the map frame.
   Eigen::Isometry3d mount = Eigen::Isometry3d::Identity();
-  std::optional<PinholeIntrinsics> pinhole;  // depth images: the configured intrinsics
+  // Depth images: the camera's intrinsics, configured; unset when they come from the first
+  // CameraInfo (then `setup` is the sensor as configured, for SpecFromCameraInfo).
+  std::optional<PinholeIntrinsics> pinhole;
+  SensorSetup setup;
 };
 
 struct Ros2IngestOptions {
@@ -69,7 +74,11 @@ struct Ros2IngestOptions {
 
 class Ros2Ingest {
  public:
-  Ros2Ingest(IngestQueues* queues, Ros2IngestOptions options);
+  // Gives a camera configured without intrinsics the beams of its first CameraInfo
+  // (FusionWorker::DefineSensor); an error leaves it waiting.
+  using DefineSensor = std::function<Status(const std::string& sensor_id, const SensorSpec& spec)>;
+
+  Ros2Ingest(IngestQueues* queues, Ros2IngestOptions options, DefineSensor define_sensor = {});
   ~Ros2Ingest();
   Ros2Ingest(const Ros2Ingest&) = delete;
   Ros2Ingest& operator=(const Ros2Ingest&) = delete;
@@ -97,6 +106,7 @@ class Ros2Ingest {
     Ros2Sensor config;
     std::uint64_t sequence_number = 0;
     std::string camera_info_mismatch;  // empty: the last CameraInfo agreed (or none came yet)
+    std::string no_camera_info;        // why a camera without intrinsics has none yet
     std::deque<Parked> parked;         // waiting for their transform, oldest first
   };
 
@@ -107,6 +117,8 @@ class Ros2Ingest {
   void OnPointCloud2(SensorState& sensor, const sensor_msgs_msg_dds__PointCloud2_& sample);
   void OnImage(SensorState& sensor, const sensor_msgs_msg_dds__Image_& sample);
   void OnCameraInfo(SensorState& sensor, const sensor_msgs_msg_dds__CameraInfo_& sample);
+  // A camera configured without intrinsics takes them from `info` (its first usable one).
+  void TakeIntrinsics(SensorState& sensor, const ros2::CameraInfo& info);
   void OnTf(const tf2_msgs_msg_dds__TFMessage_& sample, bool is_static);
   // A converted message's points as a cloud of the sensor, handed to Place.
   void Deliver(SensorState& sensor, const ros2::Header& header, std::uint32_t width,
@@ -125,6 +137,7 @@ class Ros2Ingest {
 
   IngestQueues* queues_;
   Ros2IngestOptions options_;
+  DefineSensor define_sensor_;
   std::vector<SensorState> sensors_;
   std::deque<Reader> readers_;  // stable addresses: listeners hold them
   TransformBuffer tf_;          // the ingest thread's alone
