@@ -14,9 +14,12 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
+// A voter: a leaf, or a cube of leaves merged at their weighted centroid.
 struct WeightedPoint {
   Eigen::Vector3d p;
-  double w;
+  double w;              // its vote: p(m) times the voxels it stands for
+  double voxels = 1.0;   // voxels of the finest depth it stands for
+  double evidence = 0.0;  // log-odds above the least that votes, times its voxels (voxels only)
   bool claimed = false;  // already supports an accepted plane
 };
 
@@ -26,17 +29,20 @@ struct Peak {
   double d;
 };
 
-// Weighted total-least-squares plane through the points within `band` of (n,
-// d).
-bool Refine(const std::vector<WeightedPoint>& points, double band, int iterations,
+// Weighted total-least-squares plane through the points within `band` of (n, d), weighted by
+// their votes or by their evidence.
+bool Refine(const std::vector<WeightedPoint>& points, double band, int iterations, bool by_evidence,
             Eigen::Vector3d* n, double* d) {
+  const auto weight = [by_evidence](const WeightedPoint& wp) {
+    return by_evidence ? wp.evidence : wp.w;
+  };
   for (int it = 0; it < iterations; ++it) {
     double w_sum = 0.0;
     Eigen::Vector3d mean = Eigen::Vector3d::Zero();
     for (const auto& wp : points) {
       if (wp.claimed || std::abs(n->dot(wp.p) - *d) > band) continue;
-      w_sum += wp.w;
-      mean += wp.w * wp.p;
+      w_sum += weight(wp);
+      mean += weight(wp) * wp.p;
     }
     if (w_sum <= 0.0) return false;
     mean /= w_sum;
@@ -44,7 +50,7 @@ bool Refine(const std::vector<WeightedPoint>& points, double band, int iteration
     for (const auto& wp : points) {
       if (wp.claimed || std::abs(n->dot(wp.p) - *d) > band) continue;
       const Eigen::Vector3d q = wp.p - mean;
-      cov += wp.w * q * q.transpose();
+      cov += weight(wp) * q * q.transpose();
     }
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(cov);
     Eigen::Vector3d normal = solver.eigenvectors().col(0);
@@ -107,6 +113,8 @@ std::vector<WeightedPoint> CollectVoters(const octomap::OcTree& tree, const Houg
   const double res = tree.getResolution();
   std::vector<WeightedPoint> points;
   *max_norm = 0.0;
+  const double least = std::max(options.min_probability, 1e-6);
+  const double min_log_odds = std::log(least / (1.0 - least));
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
     if (poller->Tick(16)) break;
     const double p = it->getOccupancy();
@@ -114,7 +122,9 @@ std::vector<WeightedPoint> CollectVoters(const octomap::OcTree& tree, const Houg
     const Eigen::Vector3d c(it.getX(), it.getY(), it.getZ());
     if (options.region && !options.region->contains(c)) continue;
     const double size_ratio = it.getSize() / res;
-    points.push_back({c, p * size_ratio * size_ratio * size_ratio, false});
+    const double voxels = size_ratio * size_ratio * size_ratio;
+    const double evidence = std::max(0.0, static_cast<double>(it->getLogOdds()) - min_log_odds);
+    points.push_back({c, p * voxels, voxels, evidence * voxels, false});
     *max_norm = std::max(*max_norm, c.norm());
   }
   return points;
@@ -128,7 +138,7 @@ std::vector<WeightedPoint> MergedVoters(const std::vector<WeightedPoint>& points
                                         Poller* poller) {
   struct Sum {
     Eigen::Vector3d wp = Eigen::Vector3d::Zero();
-    double w = 0.0;
+    double w = 0.0, voxels = 0.0;
   };
   std::unordered_map<std::uint64_t, Sum> cubes;
   cubes.reserve(points.size() / 4 + 1);
@@ -144,10 +154,13 @@ std::vector<WeightedPoint> MergedVoters(const std::vector<WeightedPoint>& points
     Sum& sum = cubes[(axis(wp.p.x()) << 42) | (axis(wp.p.y()) << 21) | axis(wp.p.z())];
     sum.wp += wp.w * wp.p;
     sum.w += wp.w;
+    sum.voxels += wp.voxels;
   }
   std::vector<WeightedPoint> merged;
   merged.reserve(cubes.size());
-  for (const auto& [key, sum] : cubes) merged.push_back({sum.wp / sum.w, sum.w, false});
+  for (const auto& [key, sum] : cubes) {
+    merged.push_back({sum.wp / sum.w, sum.w, sum.voxels, 0.0, false});
+  }
   // The hash map's order is not the input's: sort so that the search is deterministic.
   std::sort(merged.begin(), merged.end(), [](const WeightedPoint& a, const WeightedPoint& b) {
     return std::tie(a.p.x(), a.p.y(), a.p.z()) < std::tie(b.p.x(), b.p.y(), b.p.z());
@@ -185,17 +198,42 @@ struct Accumulator {
   [[nodiscard]] float at(std::size_t k, int b) const { return cells[k * n_d + b]; }
 };
 
+// Voters in blocks small enough to stay in cache (coordinates as floats, one array each); each
+// block votes normal by normal, so that one normal's row of distance bins takes every vote of
+// the block in turn (voter by voter, every vote would land in another row: a cache miss each).
+// Neighbouring voters mostly vote into the same bin: a row is summed in kLanes interleaved
+// copies, so that consecutive additions do not wait for each other.
 void Vote(const std::vector<WeightedPoint>& points, Accumulator* acc, Poller* poller) {
+  constexpr std::size_t kBlock = 8192, kLanes = 4;
   const float inv_d_bin = static_cast<float>(1.0 / acc->d_bin_m);
-  const std::size_t n_normals = acc->n_normals();
-  for (const auto& wp : points) {
-    if (poller->Tick(n_normals)) return;
-    const Eigen::Vector3f p = wp.p.cast<float>();
-    const auto w = static_cast<float>(wp.w);
+  const std::size_t n_normals = acc->n_normals(), n_d = static_cast<std::size_t>(acc->n_d);
+  std::vector<float> x, y, z, w, lanes(kLanes * n_d);
+  for (std::size_t begin = 0; begin < points.size(); begin += kBlock) {
+    const std::size_t end = std::min(points.size(), begin + kBlock);
+    x.clear(), y.clear(), z.clear(), w.clear();
+    for (std::size_t i = begin; i < end; ++i) {
+      x.push_back(static_cast<float>(points[i].p.x()));
+      y.push_back(static_cast<float>(points[i].p.y()));
+      z.push_back(static_cast<float>(points[i].p.z()));
+      w.push_back(static_cast<float>(points[i].w));
+    }
     for (std::size_t k = 0; k < n_normals; ++k) {
-      const float d = acc->normals[k].dot(p);
-      if (d < 0.0f) continue;
-      acc->cells[k * acc->n_d + static_cast<std::size_t>(d * inv_d_bin)] += w;
+      if (poller->Tick(x.size())) return;
+      const Eigen::Vector3f& n = acc->normals[k];
+      std::fill(lanes.begin(), lanes.end(), 0.0f);
+      for (std::size_t i = 0; i < x.size(); ++i) {
+        // Branch-free: a negative distance adds nothing to bin 0 (half the votes, in no
+        // predictable order, would otherwise mispredict).
+        const float d = n.x() * x[i] + n.y() * y[i] + n.z() * z[i];
+        const bool ahead = d >= 0.0f;
+        const auto bin = static_cast<std::uint32_t>((ahead ? d : 0.0f) * inv_d_bin);
+        lanes[bin * kLanes + i % kLanes] += ahead ? w[i] : 0.0f;
+      }
+      float* row = acc->cells.data() + k * n_d;
+      for (std::size_t b = 0; b < n_d; ++b) {
+        row[b] += (lanes[b * kLanes] + lanes[b * kLanes + 1]) +
+                  (lanes[b * kLanes + 2] + lanes[b * kLanes + 3]);
+      }
     }
   }
 }
@@ -293,7 +331,43 @@ bool DuplicatesOne(const Plane& plane, const std::vector<Plane>& accepted,
   return false;
 }
 
-// Peaks refined into planes, strongest first, each claiming its supporting voxels.
+// The plane (n, d) with the statistics of its support: the unclaimed points within `band`
+// (their voxels, summed weight, RMS distance of the points, bounding box, weighted centroid).
+// A plane that claims nothing is left with support_voxels 0.
+Plane SupportOf(const Eigen::Vector3d& n, double d, const std::vector<WeightedPoint>& points,
+                double band, Eigen::Vector3d* centroid) {
+  Plane plane = CanonicalPlane(n, d);
+  plane.extent.setEmpty();
+  double sq = 0.0, voxels = 0.0;
+  std::size_t count = 0;
+  *centroid = Eigen::Vector3d::Zero();
+  for (const auto& wp : points) {
+    const double r = plane.normal.dot(wp.p) - plane.distance_m;
+    if (wp.claimed || std::abs(r) > band) continue;
+    ++count;
+    voxels += wp.voxels;
+    plane.votes += wp.w;
+    sq += r * r;
+    *centroid += wp.w * wp.p;
+    plane.extent.extend(wp.p);
+  }
+  if (count == 0 || plane.votes <= 0.0) return plane;
+  *centroid /= plane.votes;
+  plane.support_voxels = static_cast<std::size_t>(std::llround(voxels));
+  plane.rms_m = std::sqrt(sq / static_cast<double>(count));
+  return plane;
+}
+
+// The plane claims its points out to `claim_m`: the rest of a thick surface would otherwise
+// refine into copies of it (which DuplicatesOne refuses, one by one).
+void Claim(const Plane& plane, double claim_m, std::vector<WeightedPoint>* points) {
+  for (auto& wp : *points) {
+    if (std::abs(plane.normal.dot(wp.p) - plane.distance_m) <= claim_m) wp.claimed = true;
+  }
+}
+
+// Peaks refined into planes on the voters, in the order they are accepted (strongest peak
+// first), each claiming its supporting voters.
 std::vector<Plane> ExtractPlanes(const std::vector<Peak>& peaks, std::vector<WeightedPoint>* points,
                                  const HoughOptions& options, double band, Poller* poller) {
   const double cos_nms = std::cos(options.nms_angle_rad);
@@ -323,34 +397,37 @@ std::vector<Plane> ExtractPlanes(const std::vector<Peak>& peaks, std::vector<Wei
     ++candidates;
     Eigen::Vector3d n = peak.normal;
     double d = peak.d;
-    if (!Refine(*points, band, options.refine_iterations, &n, &d)) continue;
-    Plane plane = CanonicalPlane(n, d);
-    plane.extent.setEmpty();
-    double sq = 0.0;
-    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-    // Support: voxels near the plane not explained by a stronger plane. Without this, planes
+    if (!Refine(*points, band, options.refine_iterations, false, &n, &d)) continue;
+    // Support: voters near the plane not explained by a stronger plane. Without this, planes
     // cutting obliquely through a strong plane's voxels would be reported as well.
-    for (const auto& wp : *points) {
-      const double r = plane.normal.dot(wp.p) - plane.distance_m;
-      if (wp.claimed || std::abs(r) > band) continue;
-      ++plane.support_voxels;
-      plane.votes += wp.w;
-      sq += r * r;
-      centroid += wp.w * wp.p;
-      plane.extent.extend(wp.p);
-    }
-    if (plane.support_voxels == 0) continue;
-    centroid /= plane.votes;
+    Eigen::Vector3d centroid;
+    const Plane plane = SupportOf(n, d, *points, band, &centroid);
+    if (plane.votes <= 0.0) continue;
     seen.emplace_back(plane, centroid);
     if (plane.support_voxels < options.min_support_voxels) continue;
-    plane.rms_m = std::sqrt(sq / static_cast<double>(plane.support_voxels));
     if (DuplicatesOne(plane, planes, *points, band, cos_nms, options.nms_distance_m)) continue;
-    // The plane claims its voxels out to the suppression distance: the rest of a thick surface
-    // would otherwise refine into copies of it (which DuplicatesOne refuses, one by one).
-    const double claim = std::max(band, options.nms_distance_m);
-    for (auto& wp : *points) {
-      if (std::abs(plane.normal.dot(wp.p) - plane.distance_m) <= claim) wp.claimed = true;
-    }
+    Claim(plane, std::max(band, options.nms_distance_m), points);
+    planes.push_back(plane);
+  }
+  return planes;
+}
+
+// The planes found on the voters, in their order, refined once more on the voxels themselves,
+// each claiming its voxels as it did its voters: normal, distance and support statistics come
+// from the voxels. The result is sorted by votes, strongest first.
+std::vector<Plane> RefineOnVoxels(const std::vector<Plane>& found,
+                                  std::vector<WeightedPoint>* voxels, const HoughOptions& options,
+                                  double band, Poller* poller) {
+  std::vector<Plane> planes;
+  for (const Plane& coarse : found) {
+    if (poller->Tick(voxels->size() * 8)) break;
+    Eigen::Vector3d n = coarse.normal;
+    double d = coarse.distance_m;
+    if (!Refine(*voxels, band, options.refine_iterations, true, &n, &d)) continue;
+    Eigen::Vector3d centroid;
+    const Plane plane = SupportOf(n, d, *voxels, band, &centroid);
+    if (plane.support_voxels < options.min_support_voxels) continue;
+    Claim(plane, std::max(band, options.nms_distance_m), voxels);
     planes.push_back(plane);
   }
   std::sort(planes.begin(), planes.end(),
@@ -383,6 +460,9 @@ bool HoughOptions::IsValid(std::string* why) const {
   if (vote_merge_voxels < 1 || vote_merge_voxels > 64) {
     return fail("vote_merge_voxels must lie in 1..64");
   }
+  if (!(vote_cube_min_m >= 0.0 && vote_cube_min_m <= 10.0)) {
+    return fail("vote_cube_min_m must lie in [0, 10]");
+  }
   if (region && (!region->min().allFinite() || !region->max().allFinite() ||
                  (region->min().array() > region->max().array()).any())) {
     return fail("region must be finite with min <= max");
@@ -413,13 +493,23 @@ PlaneSearch SearchPlanes(const octomap::OcTree& tree, const HoughOptions& option
     return search;
   }
   acc.Allocate();
-  // The voters merged into cubes of vote_merge_voxels voxels a side (a plane's merged voters
-  // stay on it); the refinement below fits the voxels themselves.
-  const double merge_m = options.vote_merge_voxels * tree.getResolution();
-  const std::vector<WeightedPoint> voters =
-      options.vote_merge_voxels > 1 ? MergedVoters(points, merge_m, &poller) : points;
+  const double res = tree.getResolution();
+  std::vector<WeightedPoint> voters =
+      options.vote_merge_voxels > 1 ? MergedVoters(points, options.vote_merge_voxels * res, &poller)
+                                    : points;
   if (poller.stopped()) return stopped();
-  Vote(voters, &acc, &poller);
+  // The cubes that vote: the voters merged again into cubes of twice their edge when that is
+  // needed to reach vote_cube_min_m (a centroid of centroids weighted by their sums is the
+  // centroid of the voxels). Not larger: a cube votes all its voxels' weight into one bin of
+  // every normal, and on a thick surface (a stereo wall at 1 cm: ~3 000 voxels in a cube of 16)
+  // single cubes then make peaks at every normal that bury the planes.
+  const int merge = options.vote_merge_voxels;
+  const int vote_cube_voxels = options.vote_cube_min_m > merge * res + 1e-9 ? 2 * merge : merge;
+  const std::vector<WeightedPoint> cubes =
+      vote_cube_voxels > merge ? MergedVoters(voters, vote_cube_voxels * res, &poller)
+                               : std::vector<WeightedPoint>{};
+  if (poller.stopped()) return stopped();
+  Vote(vote_cube_voxels > merge ? cubes : voters, &acc, &poller);
   if (poller.stopped()) return stopped();
   // A cell with fewer votes than a quarter of the least support a plane may have (its voxels
   // at the least occupancy that votes) cannot become one: its neighbours are not looked at.
@@ -429,7 +519,11 @@ PlaneSearch SearchPlanes(const octomap::OcTree& tree, const HoughOptions& option
   if (poller.stopped()) return stopped();
   const double band = options.support_distance_m > 0.0 ? options.support_distance_m
                                                         : 1.5 * tree.getResolution();
-  search.planes = ExtractPlanes(peaks, &points, options, band, &poller);
+  // Candidates are refined, judged and claim their support on the (few) voters; only the
+  // planes found are refined on the voxels.
+  const std::vector<Plane> found = ExtractPlanes(peaks, &voters, options, band, &poller);
+  if (poller.stopped()) return stopped();
+  search.planes = RefineOnVoxels(found, &points, options, band, &poller);
   if (poller.stopped()) return stopped();
   return search;
 }

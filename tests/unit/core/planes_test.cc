@@ -113,6 +113,75 @@ TEST(Planes, TiltedPlaneAndRegion) {
   EXPECT_NEAR(planes[0].distance_m, 2.0, 0.015);
 }
 
+// The planes of a search whose candidates are refined on merged voters (the default) are those
+// of a search that votes and refines with every voxel alone: a board, a floor and a tilted
+// panel, each within 0.3 degree and 3 mm.
+TEST(Planes, RefiningOnMergedVotersFindsThePlanesOfTheVoxels) {
+  octomap::OcTree tree(kRes);
+  AddPlanePatch(&tree, {1.75, 0.0, 0.2}, Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(), 0.6,
+                0.5, 2.0f);
+  AddPlanePatch(&tree, {1.4, 0.0, -0.41}, Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), 0.5,
+                0.9, 2.0f);
+  const Eigen::Vector3d n = NormalFromAngles(-40 * kDeg, 70 * kDeg);
+  const Eigen::Vector3d u = n.cross(Eigen::Vector3d::UnitZ()).normalized();
+  AddPlanePatch(&tree, 2.5 * n, u, n.cross(u).normalized(), 0.4, 0.4, 1.0f);
+  tree.updateInnerOccupancy();
+  HoughOptions every_voxel;
+  every_voxel.vote_merge_voxels = 1;
+  every_voxel.vote_cube_min_m = 0.0;
+  const auto fine = DetectPlanes(tree, every_voxel);
+  const auto merged = DetectPlanes(tree);
+  ASSERT_EQ(fine.size(), 3u);
+  ASSERT_EQ(merged.size(), 3u);
+  for (std::size_t i = 0; i < fine.size(); ++i) {
+    EXPECT_GT(fine[i].normal.dot(merged[i].normal), std::cos(0.3 * kDeg)) << i;
+    EXPECT_NEAR(fine[i].distance_m, merged[i].distance_m, 0.003) << i;
+    EXPECT_NEAR(static_cast<double>(fine[i].support_voxels),
+                static_cast<double>(merged[i].support_voxels), 0.02 * fine[i].support_voxels)
+        << i;
+  }
+}
+
+// A wall 8 m from the origin, tilted 20 degrees from vertical and two voxels thick: one plane,
+// where the wall is. Far out a small tilt moves the distance from the origin a lot; the vote
+// cubes (16 cm) and the refinement on them keep it one plane.
+TEST(Planes, ATiltedThickPlaneFarFromTheOriginIsOnePlane) {
+  octomap::OcTree tree(kRes);
+  const Eigen::Vector3d n = NormalFromAngles(150 * kDeg, 110 * kDeg);
+  const Eigen::Vector3d u = n.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d v = n.cross(u).normalized();
+  for (const double offset : {0.0, 0.02}) {
+    AddPlanePatch(&tree, (8.0 + offset) * n, u, v, 1.5, 1.0, 2.0f);
+  }
+  tree.updateInnerOccupancy();
+  const auto planes = DetectPlanes(tree);
+  int copies = 0;
+  for (const Plane& p : planes) {
+    if (std::abs(p.normal.dot(n)) > std::cos(10 * kDeg)) ++copies;
+  }
+  EXPECT_EQ(copies, 1);
+  ASSERT_FALSE(planes.empty());
+  EXPECT_GT(planes[0].normal.dot(n), std::cos(0.5 * kDeg));
+  EXPECT_NEAR(planes[0].distance_m, 8.01, 0.01);
+}
+
+// The plane of a two-layer slab lies nearer the layer with more evidence: the voxels are fitted
+// by their log-odds above the voting threshold, not by p(m), which is near 1 for both a voxel
+// seen once and one seen a hundred times.
+TEST(Planes, TheRefinementWeighsVoxelsByTheirEvidence) {
+  octomap::OcTree tree(kRes);
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX(), y = Eigen::Vector3d::UnitY();
+  AddPlanePatch(&tree, {2.0, 0.0, 0.01}, x, y, 1.0, 1.0, 4.0f);   // p = 0.982
+  AddPlanePatch(&tree, {2.0, 0.0, 0.03}, x, y, 1.0, 1.0, 0.4f);   // p = 0.599
+  tree.updateInnerOccupancy();
+  const auto planes = DetectPlanes(tree);
+  ASSERT_FALSE(planes.empty());
+  EXPECT_GT(std::abs(planes[0].normal.z()), std::cos(0.5 * kDeg));
+  const double height = planes[0].distance_m / std::abs(planes[0].normal.z());
+  // By evidence: 0.01 + 0.02 * 0.4 / 4.4 = 0.0118 m; by p(m): 0.01 + 0.02 * 0.599 / 1.581 = 0.0176.
+  EXPECT_NEAR(height, 0.0118, 0.001);
+}
+
 octomap::OcTree BoardTree() {
   octomap::OcTree tree(kRes);
   AddPlanePatch(&tree, {1.75, 0.0, 0.2}, Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(), 0.6,
@@ -142,6 +211,10 @@ TEST(Planes, AnAccumulatorOverTheBoundIsRefusedBeforeItIsBuilt) {
 TEST(Planes, AStopRequestEndsTheSearchInEveryPhase) {
   const octomap::OcTree tree = BoardTree();
   HoughOptions options;
+  // Every voxel votes alone: the board's 3 000 voxels make dozens of polls (merged into cubes,
+  // the whole search is two).
+  options.vote_merge_voxels = 1;
+  options.vote_cube_min_m = 0.0;
   int polls = 0;
   options.stop = [&polls] { return ++polls > 1000000; };
   ASSERT_EQ(SearchPlanes(tree, options).status, PlaneSearchStatus::kOk);
@@ -170,6 +243,8 @@ TEST(Planes, OptionsOutsideTheirRangeAreNamedAndRefused) {
       {[](HoughOptions* o) { o->nms_distance_m = INFINITY; }, "nms_distance_m"},
       {[](HoughOptions* o) { o->support_distance_m = -0.1; }, "support_distance_m"},
       {[](HoughOptions* o) { o->refine_iterations = -1; }, "refine_iterations"},
+      {[](HoughOptions* o) { o->vote_merge_voxels = 0; }, "vote_merge_voxels"},
+      {[](HoughOptions* o) { o->vote_cube_min_m = -0.1; }, "vote_cube_min_m"},
       {[](HoughOptions* o) {
          o->region = Eigen::AlignedBox3d(Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 1));
        },

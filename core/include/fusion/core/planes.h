@@ -1,7 +1,8 @@
 // Plane detection on the fused octree (paper Sec. V): a Hough transform over
 // (phi, theta, d) voting with the occupancy probability of every leaf (merged into small
 // cubes first), peak extraction with non-maximum suppression measured at each plane's
-// support, and a weighted least-squares refinement on the supporting voxels.
+// support, a weighted least-squares refinement on the merged voters and, for the planes
+// found, once more on the supporting voxels.
 //
 // Convention: a plane is {p : n . p = d} in the world frame with d >= 0
 // (metres) and unit normal n = (sin(theta) cos(phi), sin(theta) sin(phi),
@@ -43,10 +44,17 @@ struct HoughOptions {
   // = 1.5 voxels.
   double support_distance_m = 0.0;
   int refine_iterations = 3;
-  // Voters are merged into cubes of this many voxels a side before they vote (one voter per
-  // cube at its voxels' weighted centroid, their summed weight): the peaks stay, the votes
-  // cost ~1 / n^2 for surfaces. 1: every leaf votes alone. The refinement fits the voxels.
+  // Voters are merged into cubes of this many voxels a side (one voter per cube at its voxels'
+  // weighted centroid, their summed weight): a plane's cubes stay on it, and a surface costs
+  // ~1 / n^2 of its voxels. Candidates are refined, judged and claim their support on these
+  // voters; only the planes found are refined once more on the voxels. 1: every leaf alone.
   int vote_merge_voxels = 4;
+  // When the cubes above are smaller than this (metres), the votes are cast by cubes of twice
+  // their edge (merged from them): on fine maps (2 cm: 16 cm cubes) the vote costs a quarter,
+  // while the planes a search can tell apart stay those of a scene at this scale (smaller than
+  // a step or a seat). Never larger: on a thick surface one cube's weight would make a peak at
+  // every normal. 0: the votes are cast by the cubes of vote_merge_voxels.
+  double vote_cube_min_m = 0.16;
   // Work bounds. A search whose accumulator (normals x distance bins, plus the normals
   // themselves) would exceed this many cells is refused before it allocates (0 = no bound).
   std::size_t max_accumulator_cells = 0;
@@ -56,7 +64,8 @@ struct HoughOptions {
 
   // Bins positive and finite (angles at most pi), min_probability in [0, 1), at least one
   // plane, suppression and support distances finite and >= 0, refine_iterations >= 0,
-  // vote_merge_voxels in 1..64, a region finite with min <= max. False with *why (may be null) naming the field.
+  // vote_merge_voxels in 1..64, vote_cube_min_m finite in [0, 10], a region finite with
+  // min <= max. False with *why (may be null) naming the field.
   [[nodiscard]] bool IsValid(std::string* why = nullptr) const;
 };
 
