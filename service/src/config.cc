@@ -14,6 +14,7 @@
 #include "fusion/core/world_map.h"
 #include "fusion/service/conversions.h"
 #include "fusion/service/ros2_ingest.h"
+#include "fusion/service/ros2_output.h"
 #include "fusion/service/security.h"
 
 namespace fusion::service {
@@ -278,7 +279,8 @@ Status ValidateConfig(const fusion::v1::ServiceConfig& config) {
         ValidateSecurity(config.security()), ValidateMetrics(config.metrics())}) {
     if (!part.ok()) return part;
   }
-  if (const auto ros2 = Ros2IngestOptionsFromConfig(config); !ros2.ok()) return ros2.status();
+  // The ROS 2 section: its output's fields, and (read by them) the ingest's.
+  if (const auto ros2 = Ros2OutputOptionsFromConfig(config); !ros2.ok()) return ros2.status();
   return Status::Ok();
 }
 

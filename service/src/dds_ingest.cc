@@ -144,8 +144,9 @@ bool DdsIngest::AcceptSensor(const void* sample, void* self) {
 void DdsIngest::OnWritersMatched(dds_entity_t, const dds_subscription_matched_status_t status,
                                  void* self) {
   MatchedWriters& matched = static_cast<DdsIngest*>(self)->queues_->matched_writers();
-  matched.current = status.current_count;
-  matched.total = status.total_count;
+  // Changes, not counts: the ROS 2 readers add theirs to the same count (ros2_ingest.cc).
+  matched.current.fetch_add(static_cast<std::uint32_t>(status.current_count_change));
+  matched.total.fetch_add(static_cast<std::uint64_t>(status.total_count_change));
   spdlog::info("ingest: {} DDS writer(s) matched ({} since the start)", status.current_count,
                status.total_count);
 }

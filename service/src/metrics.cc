@@ -14,6 +14,7 @@
 #include <mutex>
 
 #include "fusion/service/map_service.h"
+#include "fusion/service/ros2_output.h"
 #include "fusion/wire/status_names.h"
 
 namespace fusion::service {
@@ -170,6 +171,39 @@ class StateCollector final : public prometheus::Collectable {
   const ServiceState* state_;
 };
 
+// The ROS 2 output's counts per topic, read at scrape time.
+class Ros2OutputCollector final : public prometheus::Collectable {
+ public:
+  explicit Ros2OutputCollector(const Ros2Output* output) : output_(output) {}
+
+  std::vector<MetricFamily> Collect() const override {
+    const auto counter = MetricType::Counter;
+    FamilyBuilder publications("fusiond_ros2_publications_total",
+                               "Map versions the ROS 2 output wrote, by DDS topic", counter);
+    FamilyBuilder bytes("fusiond_ros2_published_bytes_total",
+                        "Bytes of the data the ROS 2 output wrote, by DDS topic", counter);
+    FamilyBuilder failures("fusiond_ros2_publication_failures_total",
+                           "Map versions the ROS 2 output could not write, by DDS topic", counter);
+    FamilyBuilder subscribers("fusiond_ros2_matched_subscribers",
+                              "DDS readers matched with the ROS 2 output's writer, by DDS topic",
+                              MetricType::Gauge);
+    for (const Ros2TopicStats& t : output_->TopicStats()) {
+      publications.Add(static_cast<double>(t.publications), {{"topic", t.topic}});
+      bytes.Add(static_cast<double>(t.bytes), {{"topic", t.topic}});
+      failures.Add(static_cast<double>(t.failures), {{"topic", t.topic}});
+      subscribers.Add(static_cast<double>(t.matched_subscribers), {{"topic", t.topic}});
+    }
+    std::vector<MetricFamily> out;
+    for (FamilyBuilder* f : {&publications, &bytes, &failures, &subscribers}) {
+      out.push_back(std::move(f->family));
+    }
+    return out;
+  }
+
+ private:
+  const Ros2Output* output_;
+};
+
 // The RPC metrics, shared by every call's interceptor.
 struct RpcMetrics {
   prometheus::Family<prometheus::Counter>* calls = nullptr;
@@ -227,6 +261,7 @@ struct Metrics::Impl {
   WorkerHistograms worker;
   RpcMetrics rpc;
   std::shared_ptr<StateCollector> collector;
+  std::shared_ptr<Ros2OutputCollector> ros2_collector;
   std::mutex mutex;  // guards exposer
   std::unique_ptr<prometheus::Exposer> exposer;
   std::atomic<int> port{0};
@@ -284,6 +319,12 @@ void Metrics::Observe(const ServiceState* state) {
   std::lock_guard<std::mutex> lock(impl_->mutex);
   impl_->collector = std::make_shared<StateCollector>(state);
   if (impl_->exposer) impl_->exposer->RegisterCollectable(impl_->collector);
+}
+
+void Metrics::ObserveRos2Output(const Ros2Output* output) {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  impl_->ros2_collector = std::make_shared<Ros2OutputCollector>(output);
+  if (impl_->exposer) impl_->exposer->RegisterCollectable(impl_->ros2_collector);
 }
 
 int Metrics::port() const { return impl_->port; }

@@ -1,9 +1,11 @@
-// The ROS 2 part of fusiond's configuration (ros2_ingest.h): the sensors with a ros2_topic,
-// the map frame and tf.
+// The ROS 2 part of fusiond's configuration: the sensors with a ros2_topic, the map frame and
+// tf (ros2_ingest.h); the map's output (ros2_output.h).
+#include <cmath>
 #include <set>
 
 #include "fusion/service/conversions.h"
 #include "fusion/service/ros2_ingest.h"
+#include "fusion/service/ros2_output.h"
 
 namespace fusion::service {
 std::string DefaultCameraInfoTopic(const std::string& image_topic) {
@@ -105,6 +107,24 @@ StatusOr<Ros2IngestOptions> Ros2IngestOptionsFromConfig(const fusion::v1::Servic
     }
     options.sensors.push_back(s);
   }
+  return options;
+}
+
+StatusOr<Ros2OutputOptions> Ros2OutputOptionsFromConfig(const fusion::v1::ServiceConfig& config) {
+  const auto ingest = Ros2IngestOptionsFromConfig(config);  // the one reading of map_frame
+  if (!ingest.ok()) return ingest.status();
+  const auto& r = config.ros2();
+  Ros2OutputOptions options;
+  options.rate_hz = r.octomap_rate_hz();
+  if (!std::isfinite(options.rate_hz) || options.rate_hz < 0.0 ||
+      options.rate_hz > Ros2OutputOptions::kMaxRateHz) {
+    return Status::Error("ros2.octomap_rate_hz: " + std::to_string(options.rate_hz) +
+                         " is outside 0..100 (0 = off)");
+  }
+  options.binary = !r.has_octomap_binary() || r.octomap_binary();
+  options.full = r.octomap_full();
+  options.point_cloud_centers = r.point_cloud_centers();
+  options.map_frame = ingest->map_frame;
   return options;
 }
 

@@ -100,11 +100,6 @@ void TakeEach(dds_entity_t reader, const std::string& topic, Handle&& handle) {
   }
 }
 
-void OnWritersMatched(dds_entity_t, const dds_subscription_matched_status_t status, void* topic) {
-  spdlog::info("ros2: {} writer(s) matched on '{}' ({} since the start)", status.current_count,
-               LoggableText(*static_cast<const std::string*>(topic)), status.total_count);
-}
-
 }  // namespace
 
 Ros2Ingest::Ros2Ingest(IngestQueues* queues, Ros2IngestOptions options, DefineSensor define_sensor)
@@ -120,6 +115,17 @@ Ros2Ingest::Ros2Ingest(IngestQueues* queues, Ros2IngestOptions options, DefineSe
 }
 
 Ros2Ingest::~Ros2Ingest() { Stop(); }
+
+// The count GetStats reports is shared by every reader (and the points topic's): each adds its
+// changes.
+void Ros2Ingest::OnWritersMatched(dds_entity_t, const dds_subscription_matched_status_t status,
+                                  void* arg) {
+  const Reader& r = *static_cast<const Reader*>(arg);
+  r.matched->current.fetch_add(static_cast<std::uint32_t>(status.current_count_change));
+  r.matched->total.fetch_add(static_cast<std::uint64_t>(status.total_count_change));
+  spdlog::info("ros2: {} writer(s) matched on '{}' ({} since the start)", status.current_count,
+               LoggableText(r.topic), status.total_count);
+}
 
 Status Ros2Ingest::AddReader(dds_entity_t participant, Kind kind, std::size_t sensor,
                              const std::string& topic_name, bool reliable) {
@@ -144,8 +150,8 @@ Status Ros2Ingest::AddReader(dds_entity_t participant, Kind kind, std::size_t se
   dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, is_tf ? 100 : reliable ? 10 : 5);
   dds_qset_durability(
       qos, kind == Kind::kTfStatic ? DDS_DURABILITY_TRANSIENT_LOCAL : DDS_DURABILITY_VOLATILE);
-  Reader& r = readers_.emplace_back(Reader{kind, sensor, topic_name, 0});
-  dds_listener_t* listener = dds_create_listener(&r.topic);
+  Reader& r = readers_.emplace_back(Reader{kind, sensor, topic_name, 0, &queues_->matched_writers()});
+  dds_listener_t* listener = dds_create_listener(&r);
   dds_lset_subscription_matched(listener, &OnWritersMatched);
   r.reader = dds_create_reader(participant, topic, qos, listener);
   dds_delete_listener(listener);

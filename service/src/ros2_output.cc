@@ -73,24 +73,6 @@ dds_return_t WriteCentres(dds_entity_t writer, const std::string& frame_id,
 
 }  // namespace
 
-StatusOr<Ros2OutputOptions> Ros2OutputOptionsFromConfig(const fusion::v1::ServiceConfig& config) {
-  const auto ingest = Ros2IngestOptionsFromConfig(config);  // the one reading of map_frame
-  if (!ingest.ok()) return ingest.status();
-  const auto& r = config.ros2();
-  Ros2OutputOptions options;
-  options.rate_hz = r.octomap_rate_hz();
-  if (!std::isfinite(options.rate_hz) || options.rate_hz < 0.0 ||
-      options.rate_hz > Ros2OutputOptions::kMaxRateHz) {
-    return Status::Error("ros2.octomap_rate_hz: " + std::to_string(options.rate_hz) +
-                         " is outside 0..100 (0 = off)");
-  }
-  options.binary = !r.has_octomap_binary() || r.octomap_binary();
-  options.full = r.octomap_full();
-  options.point_cloud_centers = r.point_cloud_centers();
-  options.map_frame = ingest->map_frame;
-  return options;
-}
-
 std::string OctomapBinaryData(const octomap::OcTree& tree) {
   std::ostringstream out(std::ios::binary);
   tree.writeBinaryData(out);
@@ -118,45 +100,58 @@ Ros2Output::Ros2Output(const SnapshotHub* hub, Ros2OutputOptions options)
 
 Ros2Output::~Ros2Output() { Stop(); }
 
-Status Ros2Output::CreateWriter(dds_entity_t participant, const dds_topic_descriptor_t* type,
-                                const char* topic_name, dds_entity_t* writer) {
-  const dds_entity_t topic = dds_create_topic(participant, type, topic_name, nullptr, nullptr);
-  if (topic < 0) return Status::Error(DdsError("dds_create_topic", topic_name, topic));
+Status Ros2Output::CreateWriter(dds_entity_t participant, Topic* t) {
+  const dds_topic_descriptor_t* type = t->content == Content::kCentres
+                                           ? &sensor_msgs_msg_dds__PointCloud2__desc
+                                           : &octomap_msgs_msg_dds__Octomap__desc;
+  const dds_entity_t topic = dds_create_topic(participant, type, t->name, nullptr, nullptr);
+  if (topic < 0) return Status::Error(DdsError("dds_create_topic", t->name, topic));
   // octomap_server's latched map topics: a subscriber that joins late still gets the last map.
   dds_qos_t* qos = dds_create_qos();
   dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_MSECS(options_.write_timeout.count()));
   dds_qset_durability(qos, DDS_DURABILITY_TRANSIENT_LOCAL);
   dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 1);
-  *writer = dds_create_writer(participant, topic, qos, nullptr);
+  t->writer = dds_create_writer(participant, topic, qos, nullptr);
   dds_delete_qos(qos);
-  if (*writer < 0) return Status::Error(DdsError("dds_create_writer", topic_name, *writer));
+  if (t->writer < 0) {
+    const dds_return_t rc = t->writer;
+    t->writer = 0;
+    return Status::Error(DdsError("dds_create_writer", t->name, rc));
+  }
   return Status::Ok();
 }
 
 Status Ros2Output::Start(dds_entity_t participant) {
   if (!options_.enabled()) return Status::Ok();
-  struct Wanted {
-    bool on;
-    const char* topic;
-    const dds_topic_descriptor_t* type;
-    dds_entity_t* writer;
-  };
-  const Wanted wanted[] = {
-      {options_.binary, kOctomapBinaryTopic, &octomap_msgs_msg_dds__Octomap__desc,
-       &writers_.binary},
-      {options_.full, kOctomapFullTopic, &octomap_msgs_msg_dds__Octomap__desc, &writers_.full},
-      {options_.point_cloud_centers, kOctomapCentersTopic, &sensor_msgs_msg_dds__PointCloud2__desc,
-       &writers_.centres}};
-  for (const Wanted& w : wanted) {
-    if (!w.on) continue;
-    if (Status s = CreateWriter(participant, w.type, w.topic, w.writer); !s.ok()) return s;
+  const bool wanted[] = {options_.binary, options_.full, options_.point_cloud_centers};
+  std::string names;
+  for (std::size_t i = 0; i < std::size(topics_); ++i) {
+    if (!wanted[i]) continue;
+    if (Status s = CreateWriter(participant, &topics_[i]); !s.ok()) return s;
+    names += std::string(" ") + topics_[i].name;
   }
-  spdlog::info("ROS 2 output: the map in frame '{}' at most {} Hz on{}{}{}", options_.map_frame,
-               options_.rate_hz, writers_.binary ? std::string(" ") + kOctomapBinaryTopic : "",
-               writers_.full ? std::string(" ") + kOctomapFullTopic : "",
-               writers_.centres ? std::string(" ") + kOctomapCentersTopic : "");
+  spdlog::info("ROS 2 output: the map in frame '{}' at most {} Hz on{}", options_.map_frame,
+               options_.rate_hz, names);
   thread_ = std::thread([this] { Loop(); });
   return Status::Ok();
+}
+
+std::vector<Ros2TopicStats> Ros2Output::TopicStats() const {
+  std::vector<Ros2TopicStats> stats;
+  for (const Topic& t : topics_) {
+    if (t.writer == 0) continue;
+    Ros2TopicStats s;
+    s.topic = t.name;
+    s.publications = t.publications.load();
+    s.bytes = t.bytes.load();
+    s.failures = t.failures.load();
+    dds_publication_matched_status_t matched{};
+    if (dds_get_publication_matched_status(t.writer, &matched) == DDS_RETCODE_OK) {
+      s.matched_subscribers = matched.current_count;
+    }
+    stats.push_back(std::move(s));
+  }
+  return stats;
 }
 
 void Ros2Output::Stop() {
@@ -178,17 +173,7 @@ void Ros2Output::Loop() {
     // A reference to the immutable version: the worker publishes the next one meanwhile.
     const auto snapshot = hub_->Current();
     if (snapshot->version != last_version_) {
-      Status published;
-      try {
-        published = Publish(*snapshot);
-      } catch (const std::exception& e) {  // e.g. bad_alloc serialising a huge map
-        published = Status::Error(std::string("serialising the map: ") + e.what());
-      }
-      if (published.ok()) {
-        published_.fetch_add(1);
-      } else {
-        CountFailure(published);
-      }
+      Publish(*snapshot);
       last_version_ = snapshot->version;  // a failed version is not retried: the next one comes
     }
     next += period;
@@ -198,43 +183,55 @@ void Ros2Output::Loop() {
   }
 }
 
-Status Ros2Output::Publish(const MapSnapshot& snapshot) {
-  const octomap::OcTree& tree = *snapshot.tree;
+void Ros2Output::Publish(const MapSnapshot& snapshot) {
   const auto start = std::chrono::steady_clock::now();
-  // A DDS sequence holds at most 2^32 - 1 bytes.
-  constexpr std::size_t kMaxBytes = UINT32_MAX;
-  const auto too_large = [](const char* topic, std::size_t bytes) {
-    return Status::Error(std::string(topic) + ": the map is " + std::to_string(bytes) +
-                         " bytes, more than a message holds");
-  };
-  if (writers_.binary) {
-    std::string data = OctomapBinaryData(tree);
-    if (data.size() > kMaxBytes) return too_large(kOctomapBinaryTopic, data.size());
-    const dds_return_t rc = WriteOctomap(writers_.binary, options_.map_frame, true, tree, data);
-    if (rc != DDS_RETCODE_OK) return Status::Error(DdsError("dds_write", kOctomapBinaryTopic, rc));
-  }
-  if (writers_.full) {
-    std::string data = OctomapFullData(tree);
-    if (data.size() > kMaxBytes) return too_large(kOctomapFullTopic, data.size());
-    const dds_return_t rc = WriteOctomap(writers_.full, options_.map_frame, false, tree, data);
-    if (rc != DDS_RETCODE_OK) return Status::Error(DdsError("dds_write", kOctomapFullTopic, rc));
-  }
-  if (writers_.centres) {
-    std::vector<float> xyz = OccupiedLeafCentres(tree);
-    if (xyz.size() * sizeof(float) > kMaxBytes) {
-      return too_large(kOctomapCentersTopic, xyz.size() * sizeof(float));
+  for (Topic& topic : topics_) {
+    if (topic.writer == 0) continue;
+    std::size_t bytes = 0;
+    Status published;
+    try {
+      published = PublishOn(topic, *snapshot.tree, &bytes);
+    } catch (const std::exception& e) {  // e.g. bad_alloc serialising a huge map
+      published = Status::Error(std::string(topic.name) + ": serialising the map: " + e.what());
     }
-    const dds_return_t rc = WriteCentres(writers_.centres, options_.map_frame, xyz);
-    if (rc != DDS_RETCODE_OK) return Status::Error(DdsError("dds_write", kOctomapCentersTopic, rc));
+    if (!published.ok()) {
+      CountFailure(topic, published);
+      continue;
+    }
+    topic.publications.fetch_add(1);
+    topic.bytes.fetch_add(bytes);
   }
   spdlog::debug(
       "ROS 2 output: map version {} published ({:.1f} ms)", snapshot.version,
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+}
+
+Status Ros2Output::PublishOn(const Topic& topic, const octomap::OcTree& tree, std::size_t* bytes) {
+  // A DDS sequence holds at most 2^32 - 1 bytes.
+  constexpr std::size_t kMaxBytes = UINT32_MAX;
+  const auto too_large = [&](std::size_t n) {
+    return Status::Error(std::string(topic.name) + ": the map is " + std::to_string(n) +
+                         " bytes, more than a message holds");
+  };
+  dds_return_t rc = DDS_RETCODE_OK;
+  if (topic.content == Content::kCentres) {
+    std::vector<float> xyz = OccupiedLeafCentres(tree);
+    *bytes = xyz.size() * sizeof(float);
+    if (*bytes > kMaxBytes) return too_large(*bytes);
+    rc = WriteCentres(topic.writer, options_.map_frame, xyz);
+  } else {
+    const bool binary = topic.content == Content::kBinary;
+    std::string data = binary ? OctomapBinaryData(tree) : OctomapFullData(tree);
+    *bytes = data.size();
+    if (*bytes > kMaxBytes) return too_large(*bytes);
+    rc = WriteOctomap(topic.writer, options_.map_frame, binary, tree, data);
+  }
+  if (rc != DDS_RETCODE_OK) return Status::Error(DdsError("dds_write", topic.name, rc));
   return Status::Ok();
 }
 
-void Ros2Output::CountFailure(const Status& status) {
-  failures_.fetch_add(1);
+void Ros2Output::CountFailure(Topic& topic, const Status& status) {
+  topic.failures.fetch_add(1);
   ++unlogged_failures_;
   const auto now = std::chrono::steady_clock::now();
   if (now - last_failure_log_ < options_.log_interval) return;

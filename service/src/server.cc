@@ -70,8 +70,10 @@ Status FusionServer::Start() {
   if (Status started = p.ros2_ingest->Start(participant_); !started.ok()) return started;
   auto output_options = Ros2OutputOptionsFromConfig(config_);
   if (!output_options.ok()) return output_options.status();
+  const bool output_enabled = output_options->enabled();
   p.ros2_output = std::make_unique<Ros2Output>(p.stack->state()->hub, std::move(*output_options));
   if (Status started = p.ros2_output->Start(participant_); !started.ok()) return started;
+  if (p.metrics && output_enabled) p.metrics->ObserveRos2Output(p.ros2_output.get());
 
   const auto credentials = ServerCredentialsFor(config_.security());
   if (!credentials.ok()) return credentials.status().WithContext("security");

@@ -17,6 +17,7 @@
 #include <csignal>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <memory>
 #include <sstream>
@@ -26,6 +27,8 @@
 #include <vector>
 
 #include "../support/fusiond_fixture.h"
+#include "../support/http_get.h"
+#include "../support/prometheus_text.h"
 #include "fusion/v1/map_service.grpc.pb.h"
 
 #if FUSION_HAVE_FASTDDS
@@ -245,6 +248,87 @@ TEST_F(Ros2OutputTest, FastDdsSubscribersReadTheSnapshotsMapAlsoWhenTheyJoinLate
   ASSERT_TRUE(TakeSample(late_full, &late_map, 15s)) << "the late subscriber got no full map";
   EXPECT_TRUE(SameMap(late_map, ot, &why)) << why;
   EXPECT_EQ(Stats().map_version(), last_version) << "the map changed during the test";
+  EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
+}
+// fusiond's /metrics counts what the ROS 2 output does, per topic: the map versions it wrote,
+// their data's bytes, failures, and the DDS readers matched with each writer now (a Fast DDS
+// subscriber on two of the three topics, then none once it leaves).
+TEST_F(Ros2OutputTest, MetricsCountPublicationsBytesAndMatchedSubscribersPerTopic) {
+  std::ofstream(config_, std::ios::app) << "metrics { listen_address: \"127.0.0.1:0\" }\n";
+  auto fusiond = Start();
+  ASSERT_TRUE(fusiond);
+  const auto port = fusiond->WaitForOutput(R"(fusiond metrics on 127\.0\.0\.1:(\d+))", 5s);
+  ASSERT_TRUE(port) << fusiond->output();
+  std::string body;
+  const auto scrape = [&] {
+    std::string head;
+    body = HttpGet(std::stoi(*port), "/metrics", &head);
+    auto parsed = PrometheusText::Parse(body);
+    EXPECT_TRUE(parsed.ok()) << parsed.error;
+    return parsed;
+  };
+  const auto series = [](const char* family, const char* topic) {
+    return std::string(family) + "{topic=\"" + topic + "\"}";
+  };
+  const auto scrape_until = [&](const std::function<bool(const PrometheusText&)>& done) {
+    PrometheusText m = scrape();
+    for (const auto end = std::chrono::steady_clock::now() + 15s;
+         !done(m) && std::chrono::steady_clock::now() < end; m = scrape()) {
+      std::this_thread::sleep_for(100ms);
+    }
+    EXPECT_TRUE(done(m)) << body;
+    return m;
+  };
+  const char* const kSubscribers = "fusiond_ros2_matched_subscribers";
+  {
+    FastDdsParticipant subscriber(domain_, "fusion_test_metrics");
+    ASSERT_TRUE(subscriber.ok());
+    auto* binary_reader =
+        subscriber.CreateReader<octomap_msgs::msg::dds_::Octomap_PubSubType>("rt/octomap_binary");
+    auto* full_reader =
+        subscriber.CreateReader<octomap_msgs::msg::dds_::Octomap_PubSubType>("rt/octomap_full");
+    ASSERT_TRUE(binary_reader && full_reader);
+    PrometheusText m = scrape_until([&](const PrometheusText& m) {
+      return m.Value(series(kSubscribers, "rt/octomap_binary")) == 1 &&
+             m.Value(series(kSubscribers, "rt/octomap_full")) == 1;
+    });
+    EXPECT_EQ(m.Value(series(kSubscribers, "rt/octomap_point_cloud_centers")), 0);
+    EXPECT_TRUE(m.Has(series(kSubscribers, "rt/octomap_point_cloud_centers")));
+    EXPECT_EQ(m.types.at("fusiond_ros2_publications_total"), "counter");
+    EXPECT_EQ(m.types.at(kSubscribers), "gauge");
+    {
+      TestPublisher publisher(domain_);
+      ASSERT_TRUE(publisher.WaitForReader(10s));
+      ASSERT_GT(MapTheBoard(publisher), 0u);
+    }
+    ASSERT_GT(WaitForTheLastVersion(), 0u);
+    Octomap binary;
+    ASSERT_TRUE(TakeNewest(binary_reader, &binary, 10s));
+    const char* const kTopics[] = {"rt/octomap_binary", "rt/octomap_full",
+                                   "rt/octomap_point_cloud_centers"};
+    // The last version may still be on its way: wait until the three topics wrote it alike.
+    m = scrape_until([&](const PrometheusText& m) {
+      const double n = m.Value(series("fusiond_ros2_publications_total", kTopics[0]));
+      return n >= 1 && m.Value(series("fusiond_ros2_publications_total", kTopics[1])) == n &&
+             m.Value(series("fusiond_ros2_publications_total", kTopics[2])) == n;
+    });
+    const double versions = m.Value(series("fusiond_ros2_publications_total", kTopics[0]));
+    for (const char* topic : kTopics) {
+      EXPECT_EQ(m.Value(series("fusiond_ros2_publication_failures_total", topic)), 0) << topic;
+      EXPECT_GT(m.Value(series("fusiond_ros2_published_bytes_total", topic)), 0) << topic;
+    }
+    // Every version's data: at least the last one's (the one the subscriber holds), and more when
+    // several versions were written.
+    const double binary_bytes = m.Value(series("fusiond_ros2_published_bytes_total", kTopics[0]));
+    EXPECT_GE(binary_bytes, static_cast<double>(binary.data().size()));
+    if (versions > 1) EXPECT_GT(binary_bytes, static_cast<double>(binary.data().size()));
+  }
+  // The subscriber left: its readers unmatch.
+  scrape_until([&](const PrometheusText& m) {
+    return m.Has(series(kSubscribers, "rt/octomap_binary")) &&
+           m.Value(series(kSubscribers, "rt/octomap_binary")) == 0 &&
+           m.Value(series(kSubscribers, "rt/octomap_full")) == 0;
+  });
   EXPECT_EQ(fusiond->Stop(SIGTERM, 15s), 0);
 }
 #else

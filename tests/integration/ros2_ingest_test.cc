@@ -274,6 +274,9 @@ TEST_F(Ros2IngestTest, DepthImagesTakeTheirIntrinsicsFromTheFirstCameraInfo) {
   for (auto* w : {info, image}) ASSERT_TRUE(FastDdsRos2::WaitForReader(w, 10s));
   ASSERT_TRUE(WaitForMatch("rt/auto/depth/camera_info") &&
               WaitForMatch("rt/auto/depth/image_raw"));
+  // GetStats counts the ROS 2 readers' writers with the points topic's (none here).
+  EXPECT_EQ(Stats().matched_writers(), 2u);
+  EXPECT_GE(Stats().matched_writers_total(), 2u);
 
   auto early = BoardDepthImage("16UC1", "auto_optical", 1.0);
   ASSERT_TRUE(FastDdsRos2::Publish(image, early));

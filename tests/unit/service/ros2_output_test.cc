@@ -7,9 +7,11 @@
 #include <gtest/gtest.h>
 #include <octomap/AbstractOcTree.h>
 #include <octomap/OcTree.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -81,6 +83,30 @@ TEST(Ros2OutputOptions, FieldsAreReadAndBadRatesNamed) {
     EXPECT_NE(refused.status().message().find("ros2.octomap_rate_hz"), std::string::npos)
         << refused.status().message();
   }
+}
+
+// The configuration's validation checks the output's fields (fusiond refuses the file before
+// anything starts); LoadConfigFile names the field.
+TEST(Ros2OutputOptions, ValidateConfigRefusesABadRate) {
+  auto config = DefaultConfig();
+  config.mutable_ros2()->set_octomap_rate_hz(5.0);
+  EXPECT_TRUE(ValidateConfig(config).ok()) << ValidateConfig(config).message();
+  for (const double bad : {-0.5, 100.5, std::nan(""), HUGE_VAL}) {
+    config.mutable_ros2()->set_octomap_rate_hz(bad);
+    const Status refused = ValidateConfig(config);
+    EXPECT_FALSE(refused.ok()) << bad;
+    EXPECT_EQ(refused.message().rfind("ros2.octomap_rate_hz: ", 0), 0u) << refused.message();
+  }
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("ros2_output_rate_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string file = (dir / "bad.pbtxt").string();
+  { std::ofstream(file) << "ros2 { octomap_rate_hz: 1000 }\n"; }
+  config = DefaultConfig();
+  const Status loaded = LoadConfigFile(file, &config);
+  std::filesystem::remove_all(dir);
+  EXPECT_NE(loaded.message().find("ros2.octomap_rate_hz: 1000"), std::string::npos)
+      << loaded.message();
 }
 
 // The compose profile ros2's configuration (docker/fusiond-ros2.pbtxt) and the documented

@@ -21,6 +21,7 @@ class Histogram;
 namespace fusion::service {
 
 struct ServiceState;
+class Ros2Output;
 
 // What the fusion worker observes; each may be null (metrics off: not even a clock is read).
 struct WorkerHistograms {
@@ -47,6 +48,9 @@ class Metrics {
   // From now on each scrape also reads the counters and gauges of `state` (once it is set up:
   // its queues, worker, hub and persister). `state` must outlive Stop.
   void Observe(const ServiceState* state);
+  // From now on each scrape also reads the ROS 2 output's counts per topic (publications,
+  // bytes, failures, matched subscribers). `output` must outlive Stop.
+  void ObserveRos2Output(const Ros2Output* output);
   // The port Listen bound (0 before).
   [[nodiscard]] int port() const;
   // Stops the HTTP server (waits for a scrape in progress); no scrape reads the state after.

@@ -96,6 +96,7 @@ class Ros2Ingest {
     std::size_t sensor;  // index into sensors_ (clouds, images, camera infos)
     std::string topic;
     dds_entity_t reader = 0;
+    MatchedWriters* matched = nullptr;  // GetStats' count, shared with the points topic's reader
   };
   struct Parked {
     Cloud cloud;
@@ -110,6 +111,9 @@ class Ros2Ingest {
     std::deque<Parked> parked;         // waiting for their transform, oldest first
   };
 
+  // A reader's listener (arg: its Reader): logs, and adds the change to GetStats' count.
+  static void OnWritersMatched(dds_entity_t reader, dds_subscription_matched_status_t status,
+                               void* arg);
   [[nodiscard]] Status AddReader(dds_entity_t participant, Kind kind, std::size_t sensor,
                                  const std::string& topic, bool reliable);
   void Loop();

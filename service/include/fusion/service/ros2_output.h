@@ -47,9 +47,19 @@ struct Ros2OutputOptions {
   }
 };
 
-// The ros2 section's output fields. An error names the field ("ros2.octomap_rate_hz: ...").
+// The ros2 section's output fields (ros2_config.cc; ValidateConfig checks them). An error names
+// the field ("ros2.octomap_rate_hz: ...").
 [[nodiscard]] StatusOr<Ros2OutputOptions> Ros2OutputOptionsFromConfig(
     const fusion::v1::ServiceConfig& config);
+
+// What one topic's writer did since the start (fusiond's metrics: docs/operations.md).
+struct Ros2TopicStats {
+  std::string topic;
+  std::uint64_t publications = 0;  // map versions written
+  std::uint64_t bytes = 0;         // of their data (the map, or the centres' points)
+  std::uint64_t failures = 0;      // versions not written (serialising, too large, dds_write)
+  std::uint32_t matched_subscribers = 0;  // DDS readers matched now
+};
 
 // octomap_msgs' conversions (conversions.h): binaryMapToMsg's data is what
 // OcTree::writeBinaryData writes, fullMapToMsg's what OcTree::writeData writes.
@@ -72,27 +82,35 @@ class Ros2Output {
   // Stops the thread; the writers go with the participant.
   void Stop();
 
-  // Map versions published (on every configured topic), and publications that failed.
-  [[nodiscard]] std::uint64_t published() const { return published_.load(); }
-  [[nodiscard]] std::uint64_t failures() const { return failures_.load(); }
+  // The configured topics' counts (none before Start or when off); thread-safe. Valid until
+  // the participant that Start was given is deleted.
+  [[nodiscard]] std::vector<Ros2TopicStats> TopicStats() const;
 
  private:
-  struct Writers {
-    dds_entity_t binary = 0, full = 0, centres = 0;
+  enum class Content { kBinary, kFull, kCentres };
+  struct Topic {
+    const char* name;
+    Content content;
+    dds_entity_t writer = 0;  // 0: not configured
+    std::atomic<std::uint64_t> publications{0};
+    std::atomic<std::uint64_t> bytes{0};
+    std::atomic<std::uint64_t> failures{0};
   };
-  [[nodiscard]] Status CreateWriter(dds_entity_t participant, const dds_topic_descriptor_t* type,
-                                    const char* topic, dds_entity_t* writer);
+  [[nodiscard]] Status CreateWriter(dds_entity_t participant, Topic* topic);
   void Loop();
-  // Serialises and writes one version on every configured topic; an error names the topic.
-  [[nodiscard]] Status Publish(const MapSnapshot& snapshot);
-  void CountFailure(const Status& status);
+  // Serialises and writes one version on every configured topic, each counted on its own.
+  void Publish(const MapSnapshot& snapshot);
+  // Serialises and writes one version on `topic`; *bytes: its data's size. An error names it.
+  [[nodiscard]] Status PublishOn(const Topic& topic, const octomap::OcTree& tree,
+                                 std::size_t* bytes);
+  void CountFailure(Topic& topic, const Status& status);
 
   const SnapshotHub* hub_;
   Ros2OutputOptions options_;
-  Writers writers_;
+  Topic topics_[3] = {{kOctomapBinaryTopic, Content::kBinary},
+                      {kOctomapFullTopic, Content::kFull},
+                      {kOctomapCentersTopic, Content::kCentres}};
   std::uint64_t last_version_ = 0;  // the version 0 (the empty map before any render) is skipped
-  std::atomic<std::uint64_t> published_{0};
-  std::atomic<std::uint64_t> failures_{0};
   std::chrono::steady_clock::time_point last_failure_log_{};
   std::uint64_t unlogged_failures_ = 0;
   std::mutex stop_mutex_;
