@@ -49,11 +49,11 @@ struct HoughOptions {
   // ~1 / n^2 of its voxels. Candidates are refined, judged and claim their support on these
   // voters; only the planes found are refined once more on the voxels. 1: every leaf alone.
   int vote_merge_voxels = 4;
-  // When the cubes above are smaller than this (metres), the votes are cast by cubes of twice
-  // their edge (merged from them): on fine maps (2 cm: 16 cm cubes) the vote costs a quarter,
-  // while the planes a search can tell apart stay those of a scene at this scale (smaller than
-  // a step or a seat). Never larger: on a thick surface one cube's weight would make a peak at
-  // every normal. 0: the votes are cast by the cubes of vote_merge_voxels.
+  // Coarse to fine when the cubes above are smaller than this (metres; 2 cm maps and finer):
+  // every normal is first voted by cubes of twice their edge (a quarter of the votes), then the
+  // normals holding at least a quarter of the strongest cell's votes (and their neighbours)
+  // are voted again by the cubes above. What a vote costs stops growing as the map gets finer;
+  // the peaks of the strong planes are those of the fine vote. 0: one vote by the cubes above.
   double vote_cube_min_m = 0.16;
   // Work bounds. A search whose accumulator (normals x distance bins, plus the normals
   // themselves) would exceed this many cells is refused before it allocates (0 = no bound).
