@@ -20,8 +20,19 @@
 #include "../support/e2e_service.h"
 
 #ifdef FUSION_HAVE_FASTDDS
+#include <octomap/AbstractOcTree.h>
+#include <octomap/OcTree.h>
+
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <tuple>
+
 #include "../support/fastdds_ros2.h"
 #include "../support/ros2_board_messages.h"
+#include "../unit/ros2/bag_scene.h"
 #endif
 
 namespace {
@@ -474,6 +485,156 @@ TEST_F(Ros2IngestTest, BadDepthImagesAreRejectedWithTheirReason) {
   EXPECT_EQ(Reason(c, "camera_info"), 1u);
   ASSERT_TRUE(WaitInMap(1, 20s)) << "clouds in map: " << Stats().clouds_in_map();
   ExpectBoardMapped();
+}
+
+// The bag that the rosbag2 tests write (tests/unit/ros2/bag_scene.h: a robot driving past a
+// board, tf on /tf and /tf_static, an organized 8 x 6 PointCloud2 in its optical frame) mapped
+// three ways by fresh fusionds with the sensors { ... } block fusion-import prints: live, its
+// messages' CDR bytes published by Fast DDS on rt/ topics as a ROS 2 node would (all tf first,
+// so that every cloud finds the same transforms as the importer, which reads the whole bag);
+// and imported from the .db3 and from the MCAP bag with fusion-import rosbag2, replayed with
+// fusion-replay. Reliable ingest (no cloud merged while the renderer is behind) makes the map
+// independent of timing: the three hold the same occupied voxels with the same values.
+class Rosbag2ReplayTest : public Ros2IngestTest {
+ protected:
+  using Leaves = std::map<std::tuple<std::uint16_t, std::uint16_t, std::uint16_t, unsigned>, float>;
+
+  // The occupied leaves of the map fusiond serves (key, depth -> log-odds).
+  Leaves OccupiedLeaves() {
+    grpc::ClientContext context;
+    SetDeadline(&context, 10s);
+    v1::GetSnapshotRequest request;
+    request.set_format(v1::GetSnapshotRequest::FORMAT_OT);
+    auto reader = stub_->GetSnapshot(&context, request);
+    std::string data;
+    v1::SnapshotChunk chunk;
+    while (reader->Read(&chunk)) data += chunk.data();
+    EXPECT_TRUE(reader->Finish().ok());
+    std::istringstream in(data);
+    std::unique_ptr<octomap::AbstractOcTree> tree(octomap::AbstractOcTree::read(in));
+    const auto* octree = dynamic_cast<const octomap::OcTree*>(tree.get());
+    Leaves leaves;
+    if (octree == nullptr) {
+      ADD_FAILURE() << "no OcTree in the snapshot (" << data.size() << " bytes)";
+      return leaves;
+    }
+    for (auto it = octree->begin_leafs(), end = octree->end_leafs(); it != end; ++it) {
+      if (!octree->isNodeOccupied(*it)) continue;
+      const octomap::OcTreeKey k = it.getKey();
+      leaves[{k[0], k[1], k[2], it.getDepth()}] = it->getLogOdds();
+    }
+    return leaves;
+  }
+
+  // fusion-import rosbag2 of the lidar topic; returns the sensors { ... } block it prints.
+  std::string Import(const std::string& bag, const std::string& recording) {
+    std::string out;
+    EXPECT_EQ(fusion::testing::RunTool({"fusion-import", "rosbag2", bag, "--points-topic",
+                                        fusion::test::kPointsTopic, "--sensor-id", "lidar",
+                                        "--print-sensor", "-o", recording},
+                                       &out),
+              0)
+        << out;
+    return out;
+  }
+
+  // A fresh fusiond with the printed sensor (plus the noise model the importer asks for), read
+  // from rt/lidar/points too.
+  void StartWith(const std::string& sensor_block) {
+    const auto close = sensor_block.rfind('}');
+    ASSERT_NE(close, std::string::npos) << sensor_block;
+    Start("log_level: \"info\"\n"
+          "map { resolution_m: 0.05 render_interval_ms: 100 }\n"
+          "ingest { max_points: 100000 reliability: \"reliable\" }\n" +
+          sensor_block.substr(0, close) +
+          " q_mu { a1: 1 } q_sigma { a0: 0.01 } ros2_topic: \"rt/lidar/points\""
+          " ros2_reliable: true }\n");
+  }
+
+  Leaves Replay(const std::string& recording, const std::string& sensor_block) {
+    StartWith(sensor_block);
+    std::string out;
+    EXPECT_EQ(fusion::testing::RunTool({"fusion-replay", recording, "--domain",
+                                        std::to_string(domain_), "--fast", "--reliable",
+                                        "--wait-readers", "1", "--quiet"},
+                                       &out),
+              0)
+        << out;
+    EXPECT_TRUE(WaitInMap(kPosedClouds, 20s)) << "clouds in map: " << Stats().clouds_in_map();
+    return OccupiedLeaves();
+  }
+
+  // The bag's messages on `topic` as Fast DDS samples (the CDR bytes deserialised).
+  template <class PubSubType, class Message>
+  static std::vector<Message> Samples(const std::vector<fusion::test::BagEvent>& events,
+                                      const std::string& topic) {
+    std::vector<Message> out;
+    PubSubType type;
+    for (const auto& e : events) {
+      if (e.topic != topic) continue;
+      eprosima::fastrtps::rtps::SerializedPayload_t payload(
+          static_cast<std::uint32_t>(e.data.size()));
+      std::memcpy(payload.data, e.data.data(), e.data.size());
+      payload.length = static_cast<std::uint32_t>(e.data.size());
+      Message m;
+      EXPECT_TRUE(type.deserialize(&payload, &m)) << topic;
+      out.push_back(std::move(m));
+    }
+    return out;
+  }
+
+  Leaves Live(const std::vector<fusion::test::BagEvent>& events, const std::string& sensor_block) {
+    StartWith(sensor_block);
+    FastDdsRos2 dds(domain_);
+    EXPECT_TRUE(dds.ok());
+    using TfType = tf2_msgs::msg::dds_::TFMessage_PubSubType;
+    auto* tf_static = dds.Writer<TfType>("rt/tf_static", Ros2Qos::kTfStatic);
+    auto* tf = dds.Writer<TfType>("rt/tf", Ros2Qos::kTf);
+    auto* points = dds.Writer<sm::PointCloud2_PubSubType>("rt/lidar/points", Ros2Qos::kReliable);
+    for (auto* w : {tf_static, tf, points}) EXPECT_TRUE(FastDdsRos2::WaitForReader(w, 10s));
+    EXPECT_TRUE(WaitForMatch("rt/lidar/points") && WaitForMatch("rt/tf") &&
+                WaitForMatch("rt/tf_static"));
+    for (auto& m : Samples<TfType, TfMessage>(events, "/tf_static")) {
+      EXPECT_TRUE(FastDdsRos2::Publish(tf_static, m));
+    }
+    for (auto& m : Samples<TfType, TfMessage>(events, "/tf")) {
+      EXPECT_TRUE(FastDdsRos2::Publish(tf, m));
+    }
+    for (auto& m : Samples<sm::PointCloud2_PubSubType, sm::PointCloud2_>(
+             events, fusion::test::kPointsTopic)) {
+      EXPECT_TRUE(FastDdsRos2::Publish(points, m));
+    }
+    // The last cloud is stamped after the last transform: rejected as extrapolation (the
+    // importer skips it for the same reason).
+    EXPECT_TRUE(WaitCounters("lidar", [](const auto& c) {
+      return c.received() == kPosedClouds + 1 && c.rejected() == 1;
+    })) << Counters("lidar").DebugString();
+    EXPECT_EQ(Reason(Counters("lidar"), "extrapolation"), 1u);
+    EXPECT_TRUE(WaitInMap(kPosedClouds, 20s)) << "clouds in map: " << Stats().clouds_in_map();
+    return OccupiedLeaves();
+  }
+
+  static constexpr std::uint64_t kPosedClouds = 6;  // bag_scene.h's kCloudTimes
+};
+
+TEST_F(Rosbag2ReplayTest, ImportedBagsReplayToTheMapOfTheLiveMessages) {
+  const auto events = fusion::test::SceneEvents();
+  const std::string db3 = dir_ + "/bag_db3";
+  std::filesystem::create_directories(db3);
+  fusion::test::WriteSqliteBag(db3, events);
+  const std::string mcap = dir_ + "/scene.mcap";
+  std::ofstream(mcap, std::ios::binary) << fusion::test::SceneMcap(events);
+  const std::string sensor = Import(db3, dir_ + "/db3.frec");
+  ASSERT_NE(sensor.find("sensors {"), std::string::npos) << sensor;
+  EXPECT_EQ(Import(mcap, dir_ + "/mcap.frec"), sensor) << "the two bags describe one sensor";
+
+  const Leaves live = Live(events, sensor);
+  ASSERT_GT(live.size(), 20u) << "the board is not in the live map";
+  const Leaves from_db3 = Replay(dir_ + "/db3.frec", sensor);
+  const Leaves from_mcap = Replay(dir_ + "/mcap.frec", sensor);
+  EXPECT_EQ(from_db3.size(), live.size());
+  EXPECT_TRUE(from_db3 == live) << "the .db3 bag's map differs from the live one";
+  EXPECT_TRUE(from_mcap == live) << "the MCAP bag's map differs from the live one";
 }
 
 #endif  // FUSION_HAVE_FASTDDS

@@ -29,4 +29,12 @@ if(TARGET fastrtps AND FUSION_FASTDDSGEN)
       target_compile_definitions(${test} PRIVATE FUSION_HAVE_FASTDDS=1)
     endif()
   endforeach()
+  # The ingest test also writes the rosbag2 tests' bags (tests/unit/ros2/bag_scene.h), imports
+  # and replays them.
+  if(TARGET ros2_ingest_test)
+    target_link_libraries(ros2_ingest_test PRIVATE fusion::ros2_wire fusion::clients_rosbag2
+                          PkgConfig::FUSION_SQLITE3
+                          PkgConfig::FUSION_ZSTD PkgConfig::FUSION_LZ4)
+    add_dependencies(ros2_ingest_test fusion-import fusion-replay)
+  endif()
 endif()
