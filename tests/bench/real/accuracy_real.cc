@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -64,7 +65,8 @@ constexpr const char* kUsage =
     "  --stride      TUM: every N-th pixel in both directions (default 4; 1 = every pixel)\n"
     "  --scan-resolution  the laser scan's map voxel edge in metres (default 0.05)\n"
     "  --pcd-resolution   the PCD stereo frame's map voxel edge in metres (default 0.01)\n"
-    "  --only        the parts to run, comma-separated: tum, scan, pcd (default all)\n";
+    "  --only        the parts to run, comma-separated: tum, scan, pcd (default all)\n"
+    "environment: ACCURACY_REAL_PLANES=1 lists every plane FindPlanes finds\n";
 
 bool ParseArgs(int argc, char** argv, Options* o) {
   o->data_dir = (std::filesystem::path(FUSION_SOURCE_DIR) / ".." / "shared" / "data")
@@ -123,6 +125,9 @@ bool ParseArgs(int argc, char** argv, Options* o) {
 double SecondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
+
+// This process's CPU time (s): on a shared machine, what a single-threaded step would take alone.
+double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
 
 // ---- the maps ----------------------------------------------------------------------------------
 
@@ -370,7 +375,7 @@ Scores Score(const std::vector<octomap::OcTreeKey>& occupied, const Evidence& e)
 struct KnownPlanes {
   std::size_t planes = 0, copies = 0;  // planes found; of them the known plane
   std::size_t first_rank = 0;          // 1-based rank of the first copy (0: none)
-  double angle_deg = 0.0, height_mm = 0.0, time_s = 0.0;
+  double angle_deg = 0.0, height_mm = 0.0, time_s = 0.0, cpu_s = 0.0;
   std::size_t support_voxels = 0;
 };
 
@@ -381,8 +386,10 @@ KnownPlanes FindKnownPlanes(const octomap::OcTree& tree, const KnownPlane& known
   options.region = region;
   KnownPlanes f;
   const auto t0 = Clock::now();
+  const double cpu0 = CpuSeconds();
   const fusion::PlaneSearch search = fusion::SearchPlanes(tree, options);
   f.time_s = SecondsSince(t0);
+  f.cpu_s = CpuSeconds() - cpu0;
   f.planes = search.planes.size();
   const Eigen::Vector3d n_known = known.normal();
   for (std::size_t i = 0; i < search.planes.size(); ++i) {
@@ -407,8 +414,8 @@ KnownPlanes FindKnownPlanes(const octomap::OcTree& tree, const KnownPlane& known
 }
 
 void PrintKnownPlanes(const std::string& name, const std::string& what, const KnownPlanes& f) {
-  std::printf("  %s: FindPlanes %.2f s, %zu planes, %zu of them the %s", name.c_str(), f.time_s,
-              f.planes, f.copies, what.c_str());
+  std::printf("  %s: FindPlanes %.2f s (%.2f s CPU), %zu planes, %zu of them the %s", name.c_str(),
+              f.time_s, f.cpu_s, f.planes, f.copies, what.c_str());
   if (f.copies == 0) {
     std::printf("\n");
     return;
