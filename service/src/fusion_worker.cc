@@ -19,6 +19,9 @@ struct FusionWorker::Lane {
   mutable std::mutex mutex;  // guards periods (the integrator, a render of the open period)
   // Null for a camera that waits for its CameraInfo (DefineSensor makes it).
   std::unique_ptr<SensorPeriods> periods;
+  // The spec its beam grid has, for SpecOf (which must not wait for a render of the period).
+  mutable std::mutex spec_mutex;
+  std::optional<SensorSpec> spec;
   // Arrival times of the integrated clouds not yet in a published map, oldest first (only
   // with the DDS-to-queryable histogram).
   std::deque<std::chrono::steady_clock::time_point> awaiting_publication;
@@ -108,6 +111,10 @@ Status FusionWorker::AddBeamGridLocked(Lane& lane, const SensorSpec& spec) {
                                                  options_.map.pose_tolerance_m,
                                                  options_.map.pose_tolerance_rad,
                                                  options_.map.resolution_m);
+  {
+    std::lock_guard<std::mutex> lock(lane.spec_mutex);
+    lane.spec = spec;
+  }
   std::lock_guard<std::mutex> lock(lane.mutex);
   lane.periods = std::move(periods);
   return Status::Ok();
@@ -130,8 +137,8 @@ Status FusionWorker::DefineSensor(const std::string& sensor_id, const SensorSpec
 std::optional<SensorSpec> FusionWorker::SpecOf(const std::string& sensor_id) const {
   const Lane* lane = LaneOf(sensor_id);
   if (lane == nullptr) return std::nullopt;
-  std::lock_guard<std::mutex> lock(lane->mutex);
-  return lane->periods ? lane->periods->spec() : lane->setup->spec;
+  std::lock_guard<std::mutex> lock(lane->spec_mutex);
+  return lane->spec ? *lane->spec : lane->setup->spec;
 }
 
 void FusionWorker::Stop() {
