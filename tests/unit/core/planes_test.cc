@@ -165,6 +165,31 @@ TEST(Planes, ATiltedThickPlaneFarFromTheOriginIsOnePlane) {
   EXPECT_NEAR(planes[0].distance_m, 8.01, 0.01);
 }
 
+// Coarse to fine (the default at 2 cm: every normal voted by 16 cm cubes, the strong normals
+// again by 8 cm cubes) finds the planes of a single vote by the 8 cm cubes: a floor 6 m out,
+// warped (two halves 3 cm apart, one tilted by a degree), and a wall.
+TEST(Planes, CoarseToFineFindsThePlanesOfTheFineVote) {
+  octomap::OcTree tree(kRes);
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX(), y = Eigen::Vector3d::UnitY();
+  const double tilt = 1.0 * kDeg;
+  AddPlanePatch(&tree, {6.0, -1.0, 0.01}, x, y, 1.5, 1.0, 2.0f);
+  AddPlanePatch(&tree, {6.0, 1.0, 0.04}, Eigen::Vector3d(std::cos(tilt), 0.0, std::sin(tilt)), y,
+                1.5, 1.0, 1.0f);
+  AddPlanePatch(&tree, {7.6, 0.0, 1.0}, y, Eigen::Vector3d::UnitZ(), 2.0, 0.9, 2.0f);
+  tree.updateInnerOccupancy();
+  HoughOptions one_vote;
+  one_vote.vote_cube_min_m = 0.0;
+  const auto fine = DetectPlanes(tree, one_vote);
+  const auto coarse_to_fine = DetectPlanes(tree);
+  ASSERT_FALSE(fine.empty());
+  ASSERT_EQ(coarse_to_fine.size(), fine.size());
+  for (std::size_t i = 0; i < fine.size(); ++i) {
+    EXPECT_GT(fine[i].normal.dot(coarse_to_fine[i].normal), std::cos(0.1 * kDeg)) << i;
+    EXPECT_NEAR(fine[i].distance_m, coarse_to_fine[i].distance_m, 0.002) << i;
+    EXPECT_EQ(fine[i].support_voxels, coarse_to_fine[i].support_voxels) << i;
+  }
+}
+
 // The plane of a two-layer slab lies nearer the layer with more evidence: the voxels are fitted
 // by their log-odds above the voting threshold, not by p(m), which is near 1 for both a voxel
 // seen once and one seen a hundred times.
