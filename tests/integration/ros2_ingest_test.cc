@@ -630,6 +630,7 @@ TEST_F(Rosbag2ReplayTest, ImportedBagsReplayToTheMapOfTheLiveMessages) {
 
   const Leaves live = Live(events, sensor);
   ASSERT_GT(live.size(), 20u) << "the board is not in the live map";
+  RecordProperty("occupied_leaves", static_cast<int>(live.size()));
   const Leaves from_db3 = Replay(dir_ + "/db3.frec", sensor);
   const Leaves from_mcap = Replay(dir_ + "/mcap.frec", sensor);
   EXPECT_EQ(from_db3.size(), live.size());
