@@ -120,12 +120,12 @@ Status ApplyPinhole(const fusion::v1::PinholeConfig& p, SensorSpec* spec) {
 constexpr PinholeIntrinsics kNominalCamera{1.0, 1.0, 0.0, 0.0, 1, 1, 1};
 
 // A depth_image sensor without configured intrinsics: no angular fields, at most a stride.
-Status ApplyCameraInfoGeometry(const fusion::v1::SensorConfig& c, bool angular,
-                               SensorSpec* spec) {
+Status ApplyCameraInfoGeometry(const fusion::v1::SensorConfig& c, bool angular, SensorSpec* spec) {
   if (angular) {
-    return Status::Error("pinhole: a depth image's beams are its pixels (from its CameraInfo, "
-                         "or a pinhole block); the angular fields (fov_*, azimuth / elevation "
-                         "limits, cols, rows) do not apply");
+    return Status::Error(
+        "pinhole: a depth image's beams are its pixels (from its CameraInfo, "
+        "or a pinhole block); the angular fields (fov_*, azimuth / elevation "
+        "limits, cols, rows) do not apply");
   }
   PinholeIntrinsics k = kNominalCamera;
   if (c.pinhole().stride() > (1u << 16)) {
@@ -213,8 +213,7 @@ Status CheckSpec(const fusion::v1::SensorConfig& c, const SensorSpec& spec) {
 }
 
 // The fields the file sets over the base spec, then core's checks, named as the file's fields.
-Status ApplySpecFields(const fusion::v1::SensorConfig& c, bool from_camera_info,
-                       SensorSpec* spec) {
+Status ApplySpecFields(const fusion::v1::SensorConfig& c, bool from_camera_info, SensorSpec* spec) {
   if (spec->name.empty()) spec->name = c.id();
   if (c.model() == "classic_beam") {
     spec->model = ForwardModelKind::kClassicBeam;

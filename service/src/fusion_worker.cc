@@ -106,11 +106,12 @@ Status FusionWorker::StartLocked(std::unique_ptr<octomap::OcTree> history) {
 Status FusionWorker::AddBeamGridLocked(Lane& lane, const SensorSpec& spec) {
   const std::string& id = lane.setup->id;
   const MapStatus status = map_->AddSensor(id, spec);
-  if (status != MapStatus::kOk) return Status::Error("sensor '" + id + "': " + MapStatusName(status));
-  auto periods = std::make_unique<SensorPeriods>(spec, SensorGridOptions(options_.map),
-                                                 options_.map.pose_tolerance_m,
-                                                 options_.map.pose_tolerance_rad,
-                                                 options_.map.resolution_m);
+  if (status != MapStatus::kOk) {
+    return Status::Error("sensor '" + id + "': " + MapStatusName(status));
+  }
+  auto periods = std::make_unique<SensorPeriods>(
+      spec, SensorGridOptions(options_.map), options_.map.pose_tolerance_m,
+      options_.map.pose_tolerance_rad, options_.map.resolution_m);
   {
     std::lock_guard<std::mutex> lock(lane.spec_mutex);
     lane.spec = spec;
@@ -203,9 +204,10 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   {
     std::lock_guard<std::mutex> lock(lane->mutex);
     if (!lane->periods) {  // only a fusion/points cloud can come before the CameraInfo
-      spdlog::warn("worker: cloud {} of '{}' not integrated: the sensor has no beams before its "
-                   "first CameraInfo",
-                   cloud.sequence_number, cloud.sensor_id);
+      spdlog::warn(
+          "worker: cloud {} of '{}' not integrated: the sensor has no beams before its "
+          "first CameraInfo",
+          cloud.sequence_number, cloud.sensor_id);
       return;
     }
     const auto start = options_.histograms.integration_seconds ? Clock::now() : Clock::time_point{};

@@ -208,8 +208,7 @@ grpc::ServerUnaryReactor* MapService::ListSensors(grpc::CallbackServerContext* c
       info->set_cols(spec.cols);
       info->set_rows(spec.rows);
       info->set_beams(spec.cols * spec.rows);
-      info->set_cells_per_beam(
-          CellsPerBeam(spec.r_max_m, state_->config.map().beam_cell_size_m()));
+      info->set_cells_per_beam(CellsPerBeam(spec.r_max_m, state_->config.map().beam_cell_size_m()));
       info->set_memory_bytes(c->memory_bytes);
       auto* out = info->mutable_counters();
       out->set_received(c->received + c->rejected.Total());

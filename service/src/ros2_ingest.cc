@@ -150,7 +150,8 @@ Status Ros2Ingest::AddReader(dds_entity_t participant, Kind kind, std::size_t se
   dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, is_tf ? 100 : reliable ? 10 : 5);
   dds_qset_durability(
       qos, kind == Kind::kTfStatic ? DDS_DURABILITY_TRANSIENT_LOCAL : DDS_DURABILITY_VOLATILE);
-  Reader& r = readers_.emplace_back(Reader{kind, sensor, topic_name, 0, &queues_->matched_writers()});
+  Reader& r =
+      readers_.emplace_back(Reader{kind, sensor, topic_name, 0, &queues_->matched_writers()});
   dds_listener_t* listener = dds_create_listener(&r);
   dds_lset_subscription_matched(listener, &OnWritersMatched);
   r.reader = dds_create_reader(participant, topic, qos, listener);
@@ -326,10 +327,11 @@ void Ros2Ingest::TakeIntrinsics(SensorState& sensor, const ros2::CameraInfo& inf
   const PinholeIntrinsics& k = *spec->pinhole;
   sensor.config.pinhole = k;
   sensor.no_camera_info.clear();
-  spdlog::info("ros2: sensor '{}': intrinsics from its CameraInfo: fx {} fy {} cx {} cy {} px, "
-               "{} x {} pixels, stride {}: {} x {} beams",
-               LoggableText(id), k.fx_px, k.fy_px, k.cx_px, k.cy_px, k.width_px, k.height_px,
-               k.stride, spec->cols, spec->rows);
+  spdlog::info(
+      "ros2: sensor '{}': intrinsics from its CameraInfo: fx {} fy {} cx {} cy {} px, "
+      "{} x {} pixels, stride {}: {} x {} beams",
+      LoggableText(id), k.fx_px, k.fy_px, k.cx_px, k.cy_px, k.width_px, k.height_px, k.stride,
+      spec->cols, spec->rows);
 }
 
 void Ros2Ingest::OnPointCloud2(SensorState& sensor,

@@ -62,11 +62,11 @@ Status FusionServer::Start() {
   auto ros2_options = Ros2IngestOptionsFromConfig(config_);
   if (!ros2_options.ok()) return ros2_options.status();
   FusionWorker* worker = p.stack->state()->worker;
-  p.ros2_ingest = std::make_unique<Ros2Ingest>(
-      p.stack->queues(), std::move(*ros2_options),
-      [worker](const std::string& id, const SensorSpec& spec) {
-        return worker->DefineSensor(id, spec);
-      });
+  p.ros2_ingest =
+      std::make_unique<Ros2Ingest>(p.stack->queues(), std::move(*ros2_options),
+                                   [worker](const std::string& id, const SensorSpec& spec) {
+                                     return worker->DefineSensor(id, spec);
+                                   });
   if (Status started = p.ros2_ingest->Start(participant_); !started.ok()) return started;
   auto output_options = Ros2OutputOptionsFromConfig(config_);
   if (!output_options.ok()) return output_options.status();

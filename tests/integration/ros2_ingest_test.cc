@@ -283,8 +283,7 @@ TEST_F(Ros2IngestTest, DepthImagesTakeTheirIntrinsicsFromTheFirstCameraInfo) {
       dds.Writer<sm::CameraInfo_PubSubType>("rt/auto/depth/camera_info", Ros2Qos::kReliable);
   auto* image = dds.Writer<sm::Image_PubSubType>("rt/auto/depth/image_raw", Ros2Qos::kReliable);
   for (auto* w : {info, image}) ASSERT_TRUE(FastDdsRos2::WaitForReader(w, 10s));
-  ASSERT_TRUE(WaitForMatch("rt/auto/depth/camera_info") &&
-              WaitForMatch("rt/auto/depth/image_raw"));
+  ASSERT_TRUE(WaitForMatch("rt/auto/depth/camera_info") && WaitForMatch("rt/auto/depth/image_raw"));
   // GetStats counts the ROS 2 readers' writers with the points topic's (none here).
   EXPECT_EQ(Stats().matched_writers(), 2u);
   EXPECT_GE(Stats().matched_writers_total(), 2u);
@@ -529,10 +528,10 @@ class Rosbag2ReplayTest : public Ros2IngestTest {
   // fusion-import rosbag2 of the lidar topic; returns the sensors { ... } block it prints.
   std::string Import(const std::string& bag, const std::string& recording) {
     std::string out;
-    EXPECT_EQ(fusion::testing::RunTool({"fusion-import", "rosbag2", bag, "--points-topic",
-                                        fusion::test::kPointsTopic, "--sensor-id", "lidar",
-                                        "--print-sensor", "-o", recording},
-                                       &out),
+    EXPECT_EQ(fusion::testing::RunTool(
+                  {"fusion-import", "rosbag2", bag, "--points-topic", fusion::test::kPointsTopic,
+                   "--sensor-id", "lidar", "--print-sensor", "-o", recording},
+                  &out),
               0)
         << out;
     return out;
@@ -543,22 +542,23 @@ class Rosbag2ReplayTest : public Ros2IngestTest {
   void StartWith(const std::string& sensor_block) {
     const auto close = sensor_block.rfind('}');
     ASSERT_NE(close, std::string::npos) << sensor_block;
-    Start("log_level: \"info\"\n"
-          "map { resolution_m: 0.05 render_interval_ms: 100 }\n"
-          "ingest { max_points: 100000 reliability: \"reliable\" }\n" +
-          sensor_block.substr(0, close) +
-          " q_mu { a1: 1 } q_sigma { a0: 0.01 } ros2_topic: \"rt/lidar/points\""
-          " ros2_reliable: true }\n");
+    Start(
+        "log_level: \"info\"\n"
+        "map { resolution_m: 0.05 render_interval_ms: 100 }\n"
+        "ingest { max_points: 100000 reliability: \"reliable\" }\n" +
+        sensor_block.substr(0, close) +
+        " q_mu { a1: 1 } q_sigma { a0: 0.01 } ros2_topic: \"rt/lidar/points\""
+        " ros2_reliable: true }\n");
   }
 
   Leaves Replay(const std::string& recording, const std::string& sensor_block) {
     StartWith(sensor_block);
     std::string out;
-    EXPECT_EQ(fusion::testing::RunTool({"fusion-replay", recording, "--domain",
-                                        std::to_string(domain_), "--fast", "--reliable",
-                                        "--wait-readers", "1", "--quiet"},
-                                       &out),
-              0)
+    EXPECT_EQ(
+        fusion::testing::RunTool({"fusion-replay", recording, "--domain", std::to_string(domain_),
+                                  "--fast", "--reliable", "--wait-readers", "1", "--quiet"},
+                                 &out),
+        0)
         << out;
     EXPECT_TRUE(WaitInMap(kPosedClouds, 20s)) << "clouds in map: " << Stats().clouds_in_map();
     return OccupiedLeaves();

@@ -97,8 +97,8 @@ TEST(Ros2OutputOptions, ValidateConfigRefusesABadRate) {
     EXPECT_FALSE(refused.ok()) << bad;
     EXPECT_EQ(refused.message().rfind("ros2.octomap_rate_hz: ", 0), 0u) << refused.message();
   }
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("ros2_output_rate_" + std::to_string(::getpid()));
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("ros2_output_rate_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   const std::string file = (dir / "bad.pbtxt").string();
   { std::ofstream(file) << "ros2 { octomap_rate_hz: 1000 }\n"; }
