@@ -70,6 +70,12 @@ BeamTracer::BeamTracer(const BeamGrid& grid, const Eigen::Isometry3d& T_world_se
   keys_.reserve(kChunkSegments);
 }
 
+double SegmentEvidence(double hazard, double prior_log_odds, double reach) {
+  const double l = Logit(hazard);
+  if (l <= prior_log_odds) return l - prior_log_odds;
+  return reach * std::max(0.0, l - std::max(prior_log_odds, 0.0));
+}
+
 double BeamTracer::PriorLogOddsOfCells(long n) {
   const auto index = static_cast<std::size_t>(std::max(n, 0L));
   if (index >= prior_cache_.size()) {
@@ -133,7 +139,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
       c1 = std::lround(boundaries_[j + 1] / cell_m_);
       if (c1 <= c0) continue;  // shorter than a beam cell: no evidence of its own
       const double p = j < occupancy_.size() ? occupancy_[j] : 0.5;
-      double evidence = Logit(p) - PriorLogOddsOfCells(c1 - c0);
+      double evidence = SegmentEvidence(p, PriorLogOddsOfCells(c1 - c0), remaining_mass);
       evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);
       const double length_m = boundaries_[j + 1] - boundaries_[j];
       out->push_back({keys_[j], static_cast<float>(evidence),

@@ -24,10 +24,24 @@
 
 namespace fusion::detail {
 
+// The voxel rule's first step (docs/mapping.md, "From first-hit mass to evidence"): the evidence
+// (log-odds, before the clamp) of one crossing of a beam, from the beam's hazard over it,
+// hazard = P(first hit in the crossing | the beam reaches it) (telescoped Eq. 8), the beam
+// prior's log-odds over the crossing's length, and reach = P(the beam reaches the crossing)
+// (the first-hit mass left at its entry, relative to where the trace started).
+// - hazard below the prior: free evidence, logit(hazard) - prior_log_odds, as before.
+// - hazard between the prior and 1/2: none. The reading makes a surface there likelier than
+//   the prior did, but the beam still more likely passes through than stops there: the voxel
+//   stays as unknown as it was (a wide first-hit distribution's flanks).
+// - hazard above 1/2: occupied evidence logit(hazard) (against the map's unknown 1/2), times
+//   reach: behind the mass of a wide distribution Eq. 8's hazard tends to 1 while the beam
+//   hardly ever gets there, and such a crossing says next to nothing.
+[[nodiscard]] double SegmentEvidence(double hazard, double prior_log_odds, double reach);
+
 // One voxel crossing of a ray with its evidence.
 struct Segment {
   octomap::OcTreeKey key;
-  float evidence;  // log-odds relative to the prior of the crossing's length
+  float evidence;  // SegmentEvidence, clamped
   float weight;    // crossing length (metres) times the ray's weight
   double t_out_m;  // range where the ray leaves the voxel
 };
