@@ -32,13 +32,13 @@ Eigen::Vector3d Ramp(double t) {
   return kStops[i] + (kStops[i + 1] - kStops[i]) * (x - i);
 }
 
-// The occupied leaves (occupancy above min_probability) and the box around their centres.
+// The occupied leaves (occupancy at or above min_probability) and the box around their centres.
 std::vector<Voxel> CollectOccupied(const octomap::OcTree& tree, const RenderOptions& options,
                                    Eigen::AlignedBox3d* box) {
   std::vector<Voxel> voxels;
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
     const double p = it->getOccupancy();
-    if (p <= options.min_probability) continue;
+    if (p < options.min_probability) continue;
     const octomap::point3d c = it.getCoordinate();
     voxels.push_back({Eigen::Vector3d(c.x(), c.y(), c.z()), it.getSize(), p});
     box->extend(voxels.back().centre);

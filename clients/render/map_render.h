@@ -22,7 +22,9 @@ struct RenderOptions {
   double view_elevation_deg = 30.0;
   // Perspective of the camera; the picture is then zoomed so the drawn voxels fill 90 % of it.
   double fov_deg = 50.0;
-  double min_probability = 0.5;  // voxels drawn: occupancy above this
+  // Voxels drawn: occupancy at or above this (fusiond's default map.occupied_threshold, so the
+  // picture shows what its queries call occupied).
+  double min_probability = 0.55;
   ColorBy color_by = ColorBy::kHeight;
 };
 

@@ -24,7 +24,7 @@ class SnapshotWriter final : public grpc::ServerWriteReactor<fusion::v1::Snapsho
     state->heavy_pool->Post([this, state, format] {
       try {
         const auto snapshot = state->hub->Current();
-        data_ = format == fusion::v1::GetSnapshotRequest::FORMAT_BT ? SerializeBt(*snapshot->tree)
+        data_ = format == fusion::v1::GetSnapshotRequest::FORMAT_BT ? SerializeBt(*snapshot->tree, state->thresholds)
                                                                     : SerializeOt(*snapshot->tree);
         version_ = snapshot->version;
       } catch (const std::exception& e) {

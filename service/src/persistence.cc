@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <vector>
 
 namespace fusion::service {
@@ -133,10 +134,64 @@ std::string SerializeOt(const octomap::OcTree& tree) {
   return out.str();
 }
 
-std::string SerializeBt(const octomap::OcTree& tree) {
-  std::ostringstream out(std::ios::binary);
-  tree.writeBinaryConst(out);
-  return out.str();
+namespace {
+
+// What a node is in the binary format once the thresholds classify it.
+enum class Binary { kUnknown, kFree, kOccupied, kInner };
+
+// writeBinaryNode's encoding of `node` (its children's two bits each, then their subtrees),
+// with the leaves t calls unknown and the subtrees holding nothing else left out; *nodes
+// counts the nodes a reader creates for the children.
+Binary Encode(const octomap::OcTree& tree, const octomap::OcTreeNode* node,
+              const StateThresholds& t, std::string* out, std::size_t* nodes) {
+  if (!tree.nodeHasChildren(node)) {
+    switch (StateOf(node->getOccupancy(), t)) {
+      case fusion::v1::VOXEL_STATE_OCCUPIED: return Binary::kOccupied;
+      case fusion::v1::VOXEL_STATE_FREE: return Binary::kFree;
+      default: return Binary::kUnknown;
+    }
+  }
+  unsigned char bits[2] = {0, 0};
+  std::string subtrees;
+  for (unsigned i = 0; i < 8; ++i) {
+    if (!tree.nodeChildExists(node, i)) continue;
+    const Binary b = Encode(tree, tree.getNodeChild(node, i), t, &subtrees, nodes);
+    if (b == Binary::kUnknown) continue;
+    ++*nodes;
+    const unsigned shift = (i % 4) * 2;  // bit i*2 is "free or inner", bit i*2+1 "occupied or inner"
+    bits[i / 4] |= static_cast<unsigned char>(
+        (b == Binary::kOccupied ? 0u : 1u) << shift | (b == Binary::kFree ? 0u : 2u) << shift);
+  }
+  if (bits[0] == 0 && bits[1] == 0) return Binary::kUnknown;
+  out->push_back(static_cast<char>(bits[0]));
+  out->push_back(static_cast<char>(bits[1]));
+  *out += subtrees;
+  return Binary::kInner;
+}
+
+}  // namespace
+
+std::string MaximumLikelihoodData(const octomap::OcTree& tree, const StateThresholds& t,
+                                  std::size_t* nodes) {
+  std::string data;
+  *nodes = 0;
+  const octomap::OcTreeNode* root = tree.getRoot();
+  if (root == nullptr) return data;
+  if (Encode(tree, root, t, &data, nodes) == Binary::kInner) ++*nodes;  // the root itself
+  return data;
+}
+
+std::string SerializeBt(const octomap::OcTree& tree, const StateThresholds& t) {
+  std::size_t nodes = 0;
+  const std::string data = MaximumLikelihoodData(tree, t, &nodes);
+  // OctoMap's own header (writeBinaryConst of an empty tree of the resolution), its size ours.
+  std::ostringstream header(std::ios::binary);
+  octomap::OcTree(tree.getResolution()).writeBinaryConst(header);
+  std::string out = header.str();
+  const std::size_t at = out.find("\nsize 0\n");
+  if (at == std::string::npos) throw std::runtime_error("unexpected .bt header from OctoMap");
+  out.replace(at, 8, "\nsize " + std::to_string(nodes) + "\n");
+  return out + data;
 }
 
 Status WriteSnapshotFile(const octomap::OcTree& tree, const std::string& path,

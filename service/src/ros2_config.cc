@@ -116,6 +116,7 @@ StatusOr<Ros2OutputOptions> Ros2OutputOptionsFromConfig(const fusion::v1::Servic
   const auto& r = config.ros2();
   Ros2OutputOptions options;
   options.rate_hz = r.octomap_rate_hz();
+  options.thresholds = ThresholdsFromConfig(config.map());
   if (!std::isfinite(options.rate_hz) || options.rate_hz < 0.0 ||
       options.rate_hz > Ros2OutputOptions::kMaxRateHz) {
     return Status::Error("ros2.octomap_rate_hz: " + std::to_string(options.rate_hz) +

@@ -8,6 +8,7 @@
 #include <exception>
 #include <sstream>
 
+#include "fusion/service/persistence.h"
 #include "fusion/service/ros2_ingest.h"
 #include "octomap_msgs.h"
 #include "sensor_msgs.h"
@@ -73,10 +74,9 @@ dds_return_t WriteCentres(dds_entity_t writer, const std::string& frame_id,
 
 }  // namespace
 
-std::string OctomapBinaryData(const octomap::OcTree& tree) {
-  std::ostringstream out(std::ios::binary);
-  tree.writeBinaryData(out);
-  return out.str();
+std::string OctomapBinaryData(const octomap::OcTree& tree, const StateThresholds& t) {
+  std::size_t nodes = 0;
+  return MaximumLikelihoodData(tree, t, &nodes);
 }
 
 std::string OctomapFullData(const octomap::OcTree& tree) {
@@ -221,7 +221,7 @@ Status Ros2Output::PublishOn(const Topic& topic, const octomap::OcTree& tree, st
     rc = WriteCentres(topic.writer, options_.map_frame, xyz);
   } else {
     const bool binary = topic.content == Content::kBinary;
-    std::string data = binary ? OctomapBinaryData(tree) : OctomapFullData(tree);
+    std::string data = binary ? OctomapBinaryData(tree, options_.thresholds) : OctomapFullData(tree);
     *bytes = data.size();
     if (*bytes > kMaxBytes) return too_large(*bytes);
     rc = WriteOctomap(topic.writer, options_.map_frame, binary, tree, data);

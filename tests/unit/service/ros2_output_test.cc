@@ -134,8 +134,14 @@ TEST(Ros2OutputOptions, TheShippedConfigurationsLoad) {
 // binaryMapToMsg: data is writeBinaryData's, i.e. the .bt file after its header.
 TEST(Ros2OutputData, BinaryDataIsTheBtFileAfterItsHeaderAndReadsBackTheSameTree) {
   const octomap::OcTree tree = SmallTree();
-  const std::string data = OctomapBinaryData(tree);
-  const std::string bt = SerializeBt(tree);
+  const std::string data = OctomapBinaryData(tree, StateThresholds{});
+  const std::string bt = SerializeBt(tree, StateThresholds{});
+  // Without a dead band the classified writer writes what OctoMap's writeBinary does.
+  std::ostringstream octomaps_data(std::ios::binary), octomaps_bt(std::ios::binary);
+  tree.writeBinaryData(octomaps_data);
+  tree.writeBinaryConst(octomaps_bt);
+  EXPECT_EQ(data, octomaps_data.str());
+  EXPECT_EQ(bt, octomaps_bt.str());
   ASSERT_GT(bt.size(), data.size());
   EXPECT_EQ(bt.substr(bt.size() - data.size()), data);
   EXPECT_EQ(bt.substr(0, bt.size() - data.size()).rfind("data\n"), bt.size() - data.size() - 5);
@@ -148,6 +154,44 @@ TEST(Ros2OutputData, BinaryDataIsTheBtFileAfterItsHeaderAndReadsBackTheSameTree)
   ASSERT_TRUE(wall != nullptr && in_front != nullptr);
   EXPECT_TRUE(read.isNodeOccupied(wall));
   EXPECT_FALSE(read.isNodeOccupied(in_front));
+}
+
+// One classification everywhere (issue 11): the binary map says what queries say (StateOf):
+// a voxel in the dead band is unknown in it (absent), not free, and one just above OctoMap's 0.5
+// but below occupied_threshold is not occupied.
+TEST(Ros2OutputData, BinaryDataClassifiesWithTheServicesThresholds) {
+  octomap::OcTree tree(0.05);
+  const octomap::point3d occupied(0.025f, 0.025f, 0.025f), free(0.525f, 0.025f, 0.025f),
+      weak(1.025f, 0.025f, 0.025f), weakly_free(1.525f, 0.025f, 0.025f);
+  tree.setNodeValue(occupied, 2.0f);     // p 0.88
+  tree.setNodeValue(free, -2.0f);        // p 0.12
+  tree.setNodeValue(weak, 0.1f);         // p 0.525: unknown by 0.55 / 0.45
+  tree.setNodeValue(weakly_free, -0.1f); // p 0.475: unknown too
+  const StateThresholds service{0.55, 0.45};
+  for (const std::string& data :
+       {OctomapBinaryData(tree, service), SerializeBt(tree, service)}) {
+    octomap::OcTree read(0.05);
+    std::istringstream in(data);
+    if (data.rfind("# Octomap", 0) == 0) {
+      ASSERT_TRUE(read.readBinary(in));
+    } else {
+      read.readBinaryData(in);
+    }
+    const auto* o = read.search(occupied);
+    const auto* f = read.search(free);
+    ASSERT_TRUE(o != nullptr && f != nullptr);
+    EXPECT_TRUE(read.isNodeOccupied(o));
+    EXPECT_FALSE(read.isNodeOccupied(f));
+    EXPECT_EQ(read.search(weak), nullptr) << "a dead-band voxel is unknown, not in the map";
+    EXPECT_EQ(read.search(weakly_free), nullptr);
+  }
+  // Without a dead band (core's one threshold) every leaf stays, as OctoMap writes it.
+  octomap::OcTree read(0.05);
+  std::istringstream in(OctomapBinaryData(tree, StateThresholds{}));
+  read.readBinaryData(in);
+  EXPECT_EQ(read.getNumLeafNodes(), tree.getNumLeafNodes());
+  ASSERT_NE(read.search(weak), nullptr);
+  EXPECT_TRUE(read.isNodeOccupied(read.search(weak)));
 }
 
 // fullMapToMsg: data is writeData's, i.e. the .ot file after its header, log-odds and all.

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "fusion/core/status.h"
+#include "fusion/service/conversions.h"
 
 namespace fusion::service {
 
@@ -35,8 +36,15 @@ LoadStatus LoadSnapshotFile(const std::string& path, double expected_resolution_
 // (<path>.tmp-<pid>, for a pid that no longer runs); returns their names.
 std::vector<std::string> RemoveStaleTempFiles(const std::string& path);
 
-// Serialises a tree as .ot (full, log-odds) or .bt (maximum likelihood) bytes.
+// The tree as maximum-likelihood binary data (OcTree::writeBinaryData's format, the .bt file
+// after its header and octomap_msgs' binary `data`), classified as queries classify (StateOf):
+// occupied and free leaves by t, the leaves t calls unknown left out, as are subtrees that hold
+// nothing else. *nodes: the nodes a reader creates (the header's size).
+std::string MaximumLikelihoodData(const octomap::OcTree& tree, const StateThresholds& t,
+                                  std::size_t* nodes);
+
+// Serialises a tree as .ot (full, log-odds) or .bt (maximum likelihood, classified by t) bytes.
 std::string SerializeOt(const octomap::OcTree& tree);
-std::string SerializeBt(const octomap::OcTree& tree);
+std::string SerializeBt(const octomap::OcTree& tree, const StateThresholds& t);
 
 }  // namespace fusion::service

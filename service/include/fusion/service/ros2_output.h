@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "fusion/core/status.h"
+#include "fusion/service/conversions.h"
 #include "fusion/service/map_snapshot.h"
 #include "fusion/v1/config.pb.h"
 
@@ -37,6 +38,7 @@ struct Ros2OutputOptions {
   bool full = false;
   bool point_cloud_centers = false;
   std::string map_frame = "map";  // header.frame_id
+  StateThresholds thresholds;     // the binary map's classes (map.occupied / free_threshold)
   // How long one write may wait for a slow reliable reader (then it counts as failed).
   std::chrono::milliseconds write_timeout{2000};
   // Failures are logged at most once per interval (the others are counted).
@@ -63,7 +65,7 @@ struct Ros2TopicStats {
 
 // octomap_msgs' conversions (conversions.h): binaryMapToMsg's data is what
 // OcTree::writeBinaryData writes, fullMapToMsg's what OcTree::writeData writes.
-[[nodiscard]] std::string OctomapBinaryData(const octomap::OcTree& tree);
+[[nodiscard]] std::string OctomapBinaryData(const octomap::OcTree& tree, const StateThresholds& t);
 [[nodiscard]] std::string OctomapFullData(const octomap::OcTree& tree);
 // The centres of the occupied leaves (pruned ones: the centre of the coarse node, as
 // octomap_server does), x y z in the map frame, metres.
