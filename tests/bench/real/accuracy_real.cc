@@ -639,7 +639,7 @@ int RunScanGrid(const Options& o) {
     return 1;
   }
   const Built octomap = MapWithOctoMap(o.scan_resolution_m, -1.0, frames);
-  const auto& config = fusion::service::DefaultConfig().map();
+  const fusion::v1::MapConfig config = fusion::service::DefaultConfig().map();  // a copy: not a temporary's member
   const Classes classes{LogOdds(config.occupied_threshold()), LogOdds(config.free_threshold())};
   std::printf("\nmaps at %.3f m: ours (laser_3d) %zu occupied voxels in %.2f s, OctoMap %zu in "
               "%.2f s\n",
