@@ -57,7 +57,7 @@ struct WorldMapOptions {
   static constexpr double kDefaultClampingMin = FusionPolicy::kDefaultClampingMin;
   static constexpr double kDefaultClampingMax = FusionPolicy::kDefaultClampingMax;
   static constexpr double kDefaultHistoryClampingMax = 0.999;
-  static constexpr double kDefaultBeamPriorLengthM = 5.0;
+  static constexpr double kDefaultBeamPriorLengthM = 1.0;
   static constexpr double kDefaultOccupancyThreshold = 0.5;
   static constexpr double kDefaultForgetHalfLifeS = 0.0;  // never
   static constexpr float kForgottenLogOdds = 0.05f;       // |log-odds| below: unknown again
@@ -73,10 +73,11 @@ struct WorldMapOptions {
   // whatever it is. A short length (one voxel) makes an untouched 7.5 m beam almost certain
   // to hold something (1 - 0.5^375 at 2 cm), and then a beam needs ~20 readings before any
   // free space shows; at 1 m one frame suffices, and the accuracy table improves (Brier
-  // 0.0031 -> 0.0028 for the SR-3000, see docs/mapping.md). 5 m since the voxel rule gives
-  // occupied evidence only where a beam more likely stops than passes (SegmentEvidence): a
-  // single far return then marks its surface and clears its beam, and near surfaces no longer
-  // grow thicker with a longer prior (BENCHMARKS.md, "Occupancy that says what the evidence says").
+  // 0.0031 -> 0.0028 for the SR-3000, see docs/mapping.md). Far-seeing lasers want 5 m (a
+  // single return at 20 m then marks its surface and clears its beam); it is not the default
+  // because a stereo camera's unbounded beams then carry first-hit mass much further and its
+  // render traces 34 times the crossings (BENCHMARKS.md, "Occupancy that says what the
+  // evidence says").
   double beam_prior_length_m = kDefaultBeamPriorLengthM;
   double pose_tolerance_m = kDefaultPoseToleranceM;
   double pose_tolerance_rad = kDefaultPoseToleranceRad;
