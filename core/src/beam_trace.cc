@@ -266,7 +266,25 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only, std::vec
   table_.valid = false;
   double left = 0.0, right = 0.0, up = 0.0, down = 0.0;
   SurfaceSteps(beam, profile, &left, &right, &up, &down);
-  if (first_mass_only && std::isfinite(mass_begin)) {
+  // Sub-rays: k_width a side where the sector outgrows a voxel, k_surface where the surface
+  // runs on into a neighbour (enough that neighbouring sub-rays' surfaces lie within a voxel).
+  const auto k_width_at = [&](double t_stop) {
+    return std::clamp(static_cast<int>(std::ceil(width_rad_ * t_stop / options_.resolution_m)),
+                      1, std::max(1, options_.max_subrays_per_axis));
+  };
+  const int k_max = std::max(1, options_.max_surface_subrays_per_axis);
+  const auto k_surface = [&](double minus, double plus) {
+    const double span = 0.5 * (std::abs(minus) + std::abs(plus));
+    return std::clamp(static_cast<int>(std::ceil(span / options_.resolution_m)), 1, k_max);
+  };
+  // The table pays off only where several rays read the beam: a lone centre ray reads its few
+  // crossings straight from the beam (a 640 x 480 grid's beams are mostly narrower than a voxel).
+  const double farthest_stop =
+      std::min(t_end_, std::isfinite(profile.info_end_m) ? profile.info_end_m : t_end_) + cell_m_ +
+      2.0 * options_.resolution_m;
+  const bool several_rays = k_width_at(farthest_stop) > 1 || k_surface(left, right) > 1 ||
+                            k_surface(down, up) > 1;
+  if (first_mass_only && std::isfinite(mass_begin) && several_rays) {
     const double reach =
         0.5 * (std::max(std::abs(left), std::abs(right)) + std::max(std::abs(up), std::abs(down)));
     TabulateMass(beam, profile, reach);
@@ -275,16 +293,7 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only, std::vec
       Trace(beam, dir, t_start_, first(t_start_, 0.0), 0.0, 1.0f, out, profile.info_end_m);
   trace.rays = 1;
   trace.mass_begin_m = mass_begin;
-  // Sub-rays: k_width a side where the sector outgrows a voxel, k_surface where the surface
-  // runs on into a neighbour (enough that neighbouring sub-rays' surfaces lie within a voxel).
-  const int k_width =
-      std::clamp(static_cast<int>(std::ceil(width_rad_ * t_stop / options_.resolution_m)), 1,
-                 std::max(1, options_.max_subrays_per_axis));
-  const int k_max = std::max(1, options_.max_surface_subrays_per_axis);
-  const auto k_surface = [&](double minus, double plus) {
-    const double span = 0.5 * (std::abs(minus) + std::abs(plus));
-    return std::clamp(static_cast<int>(std::ceil(span / options_.resolution_m)), 1, k_max);
-  };
+  const int k_width = k_width_at(t_stop);
   const int k_u = std::max(k_width, k_surface(left, right));
   const int k_v = std::max(k_width, k_surface(down, up));
   if (k_u == 1 && k_v == 1) return trace;

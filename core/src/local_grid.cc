@@ -32,25 +32,19 @@ std::uint64_t HashPacked(std::uint64_t packed) {
 // Slots of a 4 x 4 x 4 brick (HashPacked).
 constexpr std::size_t kBrickSlots = 64;
 
-// The probe sequence of a key: the key's slot in the following blocks of kBrickSlots (a
-// brick's voxels keep their offsets, and neighbouring bricks do not pile up in one run as
-// with linear probing), and after a whole round of blocks the next offset, so that every slot
-// is reached.
+// The probe sequence of a key: the key's slot, then one block of kBrickSlots on and one offset
+// further each step (65 is odd, so a power-of-two table is visited whole). The offset must move:
+// a surface fills a few offsets of every brick it crosses (a floor: the 16 of one z layer), and
+// probing only at the key's own offset would run through the whole table's worth of them.
 class Probe {
  public:
-  Probe(std::uint64_t packed, std::size_t mask)
-      : slot_(HashPacked(packed) & mask), mask_(mask), round_mask_((mask + 1) / kBrickSlots - 1) {}
+  Probe(std::uint64_t packed, std::size_t mask) : slot_(HashPacked(packed) & mask), mask_(mask) {}
   [[nodiscard]] std::size_t slot() const { return slot_; }
-  void Next() {
-    ++step_;
-    slot_ = (slot_ + kBrickSlots + ((step_ & round_mask_) == 0 ? 1 : 0)) & mask_;
-  }
+  void Next() { slot_ = (slot_ + kBrickSlots + 1) & mask_; }
 
  private:
   std::size_t slot_;
   std::size_t mask_;
-  std::size_t round_mask_;
-  std::size_t step_ = 0;
 };
 
 }  // namespace
@@ -184,6 +178,10 @@ void LocalGrid::Merge(const LocalGrid& other) {
   if (other.combine_ != combine_ || other.resolution_m_ != resolution_m_) {
     throw std::invalid_argument("LocalGrid::Merge: grids differ in resolution or rule");
   }
+  // Both tables hash alike: walking the other's slots in order into a smaller table piles its
+  // entries into long runs (every later lookup pays for them), into one at least as large not.
+  while (entries_.size() < other.entries_.size()) Grow();
+  Reserve(size_ + other.size_);
   for (const Entry& o : other.entries_) {
     if (o.packed != kEmpty) Fold(SlotOf(o.packed), o.packed, o.a, o.b);
   }
