@@ -295,9 +295,13 @@ void BeamGrid::IntervalOccupancy(std::size_t beam, const std::vector<double>& bo
 }
 
 std::uint32_t BeamGrid::CellOf(double range_m) const {
-  double c = std::round(range_m / impl_->options.cell_size_m);
-  if (!(c >= 0.0)) c = 0.0;  // NaN and negatives
-  return static_cast<std::uint32_t>(std::min(c, static_cast<double>(cells_per_beam())));
+  // Rounded to the nearest cell edge; the cast after the clamps rounds as std::round does for
+  // these non-negative values, without its library call (a render asks for every crossing).
+  const double c = range_m / impl_->options.cell_size_m;
+  if (!(c >= 0.0)) return 0;  // NaN and negatives
+  const auto n = static_cast<double>(cells_per_beam());
+  if (c >= n) return static_cast<std::uint32_t>(n);
+  return static_cast<std::uint32_t>(c + 0.5);
 }
 
 double BeamGrid::IntervalOccupancyOfCells(double tail_a, double tail_b, double total,

@@ -23,6 +23,9 @@ double Logit(double p) {
   return std::log(p / (1.0 - p));
 }
 
+// std::lround, without its library call where x >= 0 (every crossing of a trace asks).
+long NearestCell(double x) { return x >= 0.0 ? static_cast<long>(x + 0.5) : std::lround(x); }
+
 // Offset of sub-ray i of k across a beam, in beam widths (-0.5, 0.5).
 double SubOffset(int i, int k) { return (i + 0.5) / k - 0.5; }
 
@@ -76,13 +79,15 @@ double SegmentEvidence(double hazard, double prior_log_odds, double reach) {
   return reach * std::max(0.0, l - std::max(prior_log_odds, 0.0));
 }
 
-double BeamTracer::PriorLogOddsOfCells(long n) {
+const BeamTracer::Prior& BeamTracer::PriorOfCells(long n) {
   const auto index = static_cast<std::size_t>(std::max(n, 0L));
-  if (index >= prior_cache_.size()) {
-    prior_cache_.resize(index + 1, std::numeric_limits<double>::quiet_NaN());
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  if (index >= prior_cache_.size()) prior_cache_.resize(index + 1, Prior{kNaN, kNaN});
+  Prior& v = prior_cache_[index];
+  if (std::isnan(v.probability)) {
+    v.probability = grid_.PriorOccupancy(static_cast<double>(index) * cell_m_);
+    v.log_odds = Logit(v.probability);
   }
-  double& v = prior_cache_[index];
-  if (std::isnan(v)) v = Logit(grid_.PriorOccupancy(static_cast<double>(index) * cell_m_));
   return v;
 }
 
@@ -133,13 +138,17 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
       for (double& b : boundaries_) b -= shift;
     }
     Occupancies(beam, boundaries_, &occupancy_);
-    long c1 = std::lround(boundaries_[0] / cell_m_);
+    long c1 = NearestCell(boundaries_[0] / cell_m_);
     for (std::size_t j = 0; j < keys_.size(); ++j) {
       const long c0 = c1;
-      c1 = std::lround(boundaries_[j + 1] / cell_m_);
+      c1 = NearestCell(boundaries_[j + 1] / cell_m_);
       if (c1 <= c0) continue;  // shorter than a beam cell: no evidence of its own
       const double p = j < occupancy_.size() ? occupancy_[j] : 0.5;
-      double evidence = SegmentEvidence(p, PriorLogOddsOfCells(c1 - c0), remaining_mass);
+      const Prior& prior = PriorOfCells(c1 - c0);
+      // SegmentEvidence's dead band (prior < hazard <= 1/2: none), told without its logarithm.
+      double evidence = p > prior.probability && p <= 0.5
+                            ? 0.0
+                            : SegmentEvidence(p, prior.log_odds, remaining_mass);
       evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);
       const double length_m = boundaries_[j + 1] - boundaries_[j];
       out->push_back({keys_[j], static_cast<float>(evidence),

@@ -95,7 +95,12 @@ class BeamTracer {
   // The four steps (0 where no surface is followed) of beam b.
   void SurfaceSteps(std::size_t beam, const BeamProfile& profile, double* left, double* right,
                     double* up, double* down) const;
-  double PriorLogOddsOfCells(long n);
+  // The beam prior over n cells (BeamGrid::PriorOccupancy), and its log-odds; cached.
+  struct Prior {
+    double probability;
+    double log_odds;
+  };
+  const Prior& PriorOfCells(long n);
   // IntervalOccupancy and InformationEndM of the beam being traced, read from table_ where it
   // covers the cells asked for (the same walk's numbers, so the same results).
   void Occupancies(std::size_t beam, const std::vector<double>& boundaries_m,
@@ -129,7 +134,7 @@ class BeamTracer {
   double cell_m_;
   double inv_res_;     // as VoxelTraversal floors a point's index
   double continuity_;  // tan of the shallowest incidence still followed across beams, inverted
-  std::vector<double> prior_cache_;
+  std::vector<Prior> prior_cache_;
   std::vector<double> boundaries_;
   std::vector<octomap::OcTreeKey> keys_;
   std::vector<double> occupancy_;
