@@ -289,8 +289,7 @@ BeamTrace BeamTracer::TraceBeam(std::size_t beam, bool first_mass_only, std::vec
   // The table pays off only where several rays read the beam: a lone centre ray reads its few
   // crossings straight from the beam (a 640 x 480 grid's beams are mostly narrower than a voxel).
   const double farthest_stop =
-      std::min(t_end_, std::isfinite(profile.info_end_m) ? profile.info_end_m : t_end_) + cell_m_ +
-      2.0 * options_.resolution_m;
+      std::min(t_end_, profile.info_end_m) + cell_m_ + 2.0 * options_.resolution_m;
   const bool several_rays = k_width_at(farthest_stop) > 1 || k_surface(left, right) > 1 ||
                             k_surface(down, up) > 1;
   if (first_mass_only && std::isfinite(mass_begin) && several_rays) {
