@@ -93,12 +93,18 @@ StatusOr<SensorSpec> BaseSpecFromConfig(const fusion::v1::SensorConfig& c, bool 
   return SensorSpec{};
 }
 
-// A pinhole block over `spec`: the full intrinsics, or only a stride over a pinhole preset.
-Status ApplyPinhole(const fusion::v1::PinholeConfig& p, SensorSpec* spec) {
+// Width, height and stride of a pinhole block fit a beam grid's int indices with room to spare.
+Status CheckPixelCounts(std::uint32_t width, std::uint32_t height, std::uint32_t stride) {
   constexpr std::uint32_t kMaxPixels = 1u << 16;
-  if (p.width() > kMaxPixels || p.height() > kMaxPixels || p.stride() > kMaxPixels) {
+  if (width > kMaxPixels || height > kMaxPixels || stride > kMaxPixels) {
     return Status::Error("pinhole: width, height and stride must be at most 65536");
   }
+  return Status::Ok();
+}
+
+// A pinhole block over `spec`: the full intrinsics, or only a stride over a pinhole preset.
+Status ApplyPinhole(const fusion::v1::PinholeConfig& p, SensorSpec* spec) {
+  if (Status s = CheckPixelCounts(p.width(), p.height(), p.stride()); !s.ok()) return s;
   PinholeIntrinsics k;
   if (GivesIntrinsics(p)) {
     k = {p.fx(), p.fy(), p.cx(), p.cy(), static_cast<int>(p.width()),
@@ -128,9 +134,7 @@ Status ApplyCameraInfoGeometry(const fusion::v1::SensorConfig& c, bool angular, 
         "limits, cols, rows) do not apply");
   }
   PinholeIntrinsics k = kNominalCamera;
-  if (c.pinhole().stride() > (1u << 16)) {
-    return Status::Error("pinhole: width, height and stride must be at most 65536");
-  }
+  if (Status s = CheckPixelCounts(0, 0, c.pinhole().stride()); !s.ok()) return s;
   k.stride = static_cast<int>(std::max<std::uint32_t>(1, c.pinhole().stride()));
   SetPinhole(k, spec);
   return Status::Ok();

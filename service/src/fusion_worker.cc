@@ -204,10 +204,9 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   {
     std::lock_guard<std::mutex> lock(lane->mutex);
     if (!lane->periods) {  // only a fusion/points cloud can come before the CameraInfo
-      spdlog::warn(
-          "worker: cloud {} of '{}' not integrated: the sensor has no beams before its "
-          "first CameraInfo",
-          cloud.sequence_number, cloud.sensor_id);
+      queues_->CountRejected(cloud.sensor_id, RejectReason::kNoCameraInfo);
+      rejections_.Log(RejectReason::kNoCameraInfo, cloud.sensor_id,
+                      "the sensor has no beams before its first CameraInfo");
       return;
     }
     const auto start = options_.histograms.integration_seconds ? Clock::now() : Clock::time_point{};

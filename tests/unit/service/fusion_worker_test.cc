@@ -1,7 +1,8 @@
 // FusionWorker: the published map follows the live map, including voxels that lose their
 // information (deleted from the published octree, not left behind); a moving sensor's periods
 // are committed in order, each cloud counted once (the same map as core's WorldMap fed on one
-// thread); a renderer that falls behind gets clouds merged, never dropped.
+// thread); a renderer that falls behind gets clouds merged, never dropped; a cloud of a camera
+// still waiting for its CameraInfo is counted as rejected.
 #include "fusion/service/fusion_worker.h"
 
 #include <gtest/gtest.h>
@@ -210,6 +211,32 @@ TEST_F(FusionWorkerTest, ARendererBehindGetsCloudsMergedNeverDropped) {
   EXPECT_GT(counters.merged.load(), 0u) << "the renderer kept up with 20 queued clouds?";
   EXPECT_EQ(worker_->in_map(), static_cast<std::uint64_t>(kClouds)) << "every cloud in the map";
   EXPECT_LT(worker_->renders(), static_cast<std::uint64_t>(kClouds));
+}
+
+// A camera whose intrinsics come from its CameraInfo has no beams before it: a cloud then is
+// counted as rejected (no_camera_info), not integrated; after DefineSensor clouds map.
+TEST_F(FusionWorkerTest, ACloudBeforeTheCameraInfoIsCountedAsRejected) {
+  worker_->Stop();
+  sensor_.intrinsics_from_camera_info = true;
+  worker_ = std::make_unique<FusionWorker>(Options(), std::vector<SensorSetup>{sensor_}, &queues_,
+                                           &hub_);
+  ASSERT_TRUE(worker_->Start(nullptr).ok());
+  const auto& rejected = queues_.counters("s")->rejected;
+  const auto no_camera_info = [&] {
+    return rejected.by_reason[static_cast<std::size_t>(RejectReason::kNoCameraInfo)].load();
+  };
+  ASSERT_TRUE(queues_.Push(WallAt(*tessellation_, 2.0, ++seq_), &never_));
+  const auto end = std::chrono::steady_clock::now() + 20s;
+  while (no_camera_info() == 0 && std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_EQ(no_camera_info(), 1u);
+  EXPECT_EQ(rejected.Total(), 1u);
+  EXPECT_EQ(worker_->in_map(), 0u);
+  ASSERT_TRUE(worker_->DefineSensor("s", sensor_.spec).ok());
+  --seq_;  // in_map counts the clouds integrated
+  Feed(2.0, 1);
+  EXPECT_EQ(no_camera_info(), 1u);
 }
 
 }  // namespace

@@ -81,6 +81,11 @@ TEST(Ros2IngestConfig, DepthImageWithoutIntrinsicsTakesThemFromCameraInfo) {
                   "0.01 } ros2_topic: \"rt/d\" ros2_type: \"depth_image\" }")
                 .find("sensors[0].r_max_m: "),
             std::string::npos);
+  // The stride awaiting a CameraInfo is bounded as a configured pinhole's is.
+  EXPECT_NE(Error("sensors { id: \"cam\" " + forward_model +
+                  "pinhole { stride: 70000 } ros2_topic: \"rt/d\" ros2_type: \"depth_image\" }")
+                .find("sensors[0].pinhole: width, height and stride must be at most 65536"),
+            std::string::npos);
   // Without ros2_type depth_image the same sensor still needs its geometry.
   EXPECT_NE(Error("sensors { id: \"cam\" " + forward_model + "}").find("sensors[0].fov_h_deg: "),
             std::string::npos);

@@ -46,8 +46,9 @@ enum class RejectReason : int {
   // ... a CameraInfo that disagrees with the configured pinhole intrinsics (the images of the
   // sensor are rejected until one agrees) ...
   kCameraInfoMismatch,
-  // ... a depth image before the CameraInfo that gives its sensor's intrinsics (a sensor
-  // configured without them), or while none received could make a camera ...
+  // ... a depth image (or a fusion/points cloud) before the CameraInfo that gives its
+  // sensor's intrinsics (a sensor configured without them), or while none received could make
+  // a camera ...
   kNoCameraInfo,
   // ... and the pose look-up (fusion/core/transform_buffer.h, TransformStatus; same names).
   kNoTransform,      // header.frame_id not connected to the map frame within ros2.tf_wait_s

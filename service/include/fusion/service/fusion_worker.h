@@ -32,6 +32,7 @@
 #include "fusion/service/ingest_queues.h"
 #include "fusion/service/map_snapshot.h"
 #include "fusion/service/metrics.h"
+#include "fusion/service/rejection_log.h"
 
 namespace fusion::service {
 
@@ -135,6 +136,7 @@ class FusionWorker {
   RenderOptions render_options_;
   std::vector<SensorSetup> sensors_;
   IngestQueues* queues_;
+  RejectionLog rejections_{std::chrono::seconds(1)};  // clouds that reach no beam grid
   SnapshotHub* hub_;
   std::vector<std::unique_ptr<Lane>> lanes_;
 
