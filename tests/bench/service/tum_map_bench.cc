@@ -10,14 +10,15 @@
 //      origin, max range = the Kinect's r_max).
 // The import is timed separately. Prints a markdown table.
 // Usage: tum_map_bench [--data DIR] [--resolution M] [--beams COLSxROWS] [--log-level LEVEL]
-//                      [--timeout S]
+//                      [--timeout S] [--pose-tolerance M,DEG] [--render-threads N]
 //   --data: the TUM folder (default <repo>/../shared/data/tum_fr2_pioneer_slam2); absent: exit 0
 //   --resolution: map voxel edge in metres (default 0.02); --beams: the Kinect's beam grid
 //   (default 640x480, one beam per pixel; 160x120 gives each beam a 4 x 4 block of pixels, every
 //   pixel still a reading of its beam, as the deployment does for the stereo camera);
 //   --log-level: fusiond's (default warn;
 //   other levels write its whole log to /tmp/tum_map_bench_fusiond.log); --timeout: seconds to
-//   wait for the service's map (default 900).
+//   wait for the service's map (default 900); --render-threads: map.render_threads of both
+//   maps (default: the service's, one fewer than the hardware threads).
 //
 // The shared pieces live in tum_map_bench_*.h beside this file (tests/CMakeLists.txt makes one
 // program of each .cc file here): _common (options, configuration, tools), _recording (the

@@ -79,6 +79,8 @@ struct Options {
   // beam grids, change detection); 0: the service's default (1 cm, 1 deg).
   double pose_tolerance_m = 0.0;
   double pose_tolerance_deg = 0.0;
+  // map.render_threads; -1: not set (the service's default, one fewer than the hardware threads).
+  int render_threads = -1;
 };
 
 // The repository root from this file's path (tests/bench/service/tum_map_bench_common.h).
@@ -92,7 +94,7 @@ inline std::string DefaultDataDir() {
 
 constexpr const char* kUsage =
     "usage: tum_map_bench [--data DIR] [--resolution M] [--beams COLSxROWS] [--log-level LEVEL]\n"
-    "                     [--timeout S] [--pose-tolerance M,DEG]\n"
+    "                     [--timeout S] [--pose-tolerance M,DEG] [--render-threads N]\n"
     "  --data        the TUM folder (default ../shared/data/tum_fr2_pioneer_slam2)\n"
     "  --resolution  map voxel edge, metres (default 0.02)\n"
     "  --beams       the Kinect's beam grid (default 640x480: one beam per pixel)\n"
@@ -100,7 +102,9 @@ constexpr const char* kUsage =
     "  --timeout     seconds to wait for the service's map (default 900)\n"
     "  --pose-tolerance  frames within M metres and DEG degrees of a period's first pose join\n"
     "                it (default: the service's 0.01,1); wider ones let change detection judge\n"
-    "                later frames against earlier ones\n";
+    "                later frames against earlier ones\n"
+    "  --render-threads  map.render_threads for fusiond and the in-process map (default: the\n"
+    "                service's, one fewer than the hardware threads, at least 1)\n";
 
 inline bool ParseArgs(int argc, char** argv, Options* options) {
   options->data_dir = DefaultDataDir();
@@ -132,6 +136,14 @@ inline bool ParseArgs(int argc, char** argv, Options* options) {
         std::fprintf(stderr, "--pose-tolerance wants M,DEG, both > 0, e.g. 0.5,30\n");
         return false;
       }
+    } else if (flag == "--render-threads") {
+      char* end = nullptr;
+      const long n = std::strtol(value.c_str(), &end, 10);
+      if (end == value.c_str() || *end != '\0' || n < 1 || n > 256) {
+        std::fprintf(stderr, "--render-threads wants a count in 1..256\n");
+        return false;
+      }
+      options->render_threads = static_cast<int>(n);
     } else {
       std::fprintf(stderr, "unknown flag %s\n", flag.c_str());
       return false;
@@ -180,6 +192,7 @@ inline std::string ConfigText(const Options& options) {
     config << " pose_tolerance_m: " << options.pose_tolerance_m
            << " pose_tolerance_deg: " << options.pose_tolerance_deg;
   }
+  if (options.render_threads > 0) config << " render_threads: " << options.render_threads;
   config << " }\n"
          << "ingest { reliability: \"reliable\" }\n";
   return config.str();
