@@ -8,7 +8,6 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 
 namespace fusion::detail {
 
@@ -45,21 +44,25 @@ struct BlockBox {
   double az_lo = 0.0, az_hi = 0.0, el_lo = 0.0, el_hi = 0.0;  // tangents over the corners
 };
 
+// Lattice points CornerAngles writes: the 27 corners and a 28th (the origin's again), so that
+// they come four at a time.
+inline constexpr int kLatticePoints = 28;
+
 // The 27 corners of the eight children of the block whose corner nearest -infinity is lo (world
 // frame), each child child_size wide, in the frame of a sensor at `origin` (world frame):
 // per corner {azimuth tangent, elevation tangent's signed square, z, -z}. The elevation tangent
 // is -y / hypot(x, z), or -y / z where `over_z` (a pinhole grid's row coordinate).
 inline void CornerAngles(const Eigen::Matrix3d& R_sensor_world, const Eigen::Vector3d& origin,
                          const Eigen::Vector3d& lo, double child_size, bool over_z,
-                         F4 point[27]) {
+                         F4 point[kLatticePoints]) {
   // Corners of the eight children: a 3 x 3 x 3 lattice, its angles in the sensor frame, in
   // floats so that the loop below runs on vectors (the margins cover the rounding).
   const Eigen::Vector3d base = R_sensor_world * (lo - origin);
   const Eigen::Matrix3d step = R_sensor_world * child_size;
   // Azimuth tangent x / z and the elevation tangent's signed square y |y| / (x^2 + z^2) (no
-  // square root), four lattice points at a time.
-  // The lattice is built on vectors too (scalar stores read back as vectors stall).
-  alignas(16) float pz[28], az[28], el[28];
+  // square root), four lattice points at a time; each four's {a, e, z, -z} vectors are then
+  // transposed into the four points (the lattice is built on vectors too: scalar stores read
+  // back as vectors stall).
   const F4 tiny = {1e-6f, 1e-6f, 1e-6f, 1e-6f};
   const F4 one = {1.0f, 1.0f, 1.0f, 1.0f};
   const auto splat = [](double v) {
@@ -80,13 +83,18 @@ inline void CornerAngles(const Eigen::Matrix3d& R_sensor_world, const Eigen::Vec
     const F4 a = x / zs;
     const F4 ny = -y;
     const F4 e = ny * (ny < 0 ? -ny : ny) / (over_z ? zs * zs : x * x + zs * zs);
-    std::memcpy(pz + n, &z, sizeof z);
-    std::memcpy(az + n, &a, sizeof a);
-    std::memcpy(el + n, &e, sizeof e);
+    // Per point {azimuth tangent, elevation's signed square, z, -z}: a child's ranges are then
+    // the lane-wise minimum and maximum of its eight corners.
+    const F4 nz = -z;
+    const F4 ae_lo = __builtin_shufflevector(a, e, 0, 4, 1, 5);   // a0 e0 a1 e1
+    const F4 zn_lo = __builtin_shufflevector(z, nz, 0, 4, 1, 5);  // z0 -z0 z1 -z1
+    const F4 ae_hi = __builtin_shufflevector(a, e, 2, 6, 3, 7);
+    const F4 zn_hi = __builtin_shufflevector(z, nz, 2, 6, 3, 7);
+    point[n] = __builtin_shufflevector(ae_lo, zn_lo, 0, 1, 4, 5);
+    point[n + 1] = __builtin_shufflevector(ae_lo, zn_lo, 2, 3, 6, 7);
+    point[n + 2] = __builtin_shufflevector(ae_hi, zn_hi, 0, 1, 4, 5);
+    point[n + 3] = __builtin_shufflevector(ae_hi, zn_hi, 2, 3, 6, 7);
   }
-  // Per point {azimuth tangent, elevation's signed square, z, -z}: a child's ranges are then
-  // the lane-wise minimum and maximum of its eight corners.
-  for (int n = 0; n < 27; ++n) point[n] = F4{az[n], el[n], pz[n], -pz[n]};
 }
 
 // Per axis, the nearest and farthest squared distances from the sensor at `origin` of the two
@@ -106,7 +114,7 @@ inline void SlabDistances(const Eigen::Vector3d& origin, const Eigen::Vector3d& 
 }
 
 // A child's angular box (az, el, z_max, ahead) from its eight corners in `point` (CornerAngles).
-inline void ChildAngles(const F4 point[27], int child, BlockBox* box) {
+inline void ChildAngles(const F4 point[kLatticePoints], int child, BlockBox* box) {
   const int* corners = kChildCorners[child];
   F4 lo4 = point[corners[0]], hi4 = lo4;
   for (int c = 1; c < 8; ++c) {

@@ -32,11 +32,14 @@ class Descent {
           double t_start, float global_far, const SaturatedFree* skip, RenderedGrid* out,
           RenderStats* stats);
 
+  static constexpr std::size_t kMaxOthers = 8;
+
   // The map's history over a block, and the other live contributions' nodes in it (see
   // SaturatedFree).
   struct MapHere {
+    MapHere() {}  // lo / hi left unset: only the first skip_->others.size() are ever read
     const octomap::OcTreeNode* history = nullptr;
-    std::array<const MapNode*, 8> lo{}, hi{};
+    std::array<const MapNode*, kMaxOthers> lo, hi;
     bool others_cover = false;  // an other contribution's node covers the whole block
   };
   [[nodiscard]] MapHere RootMap() const;
@@ -50,7 +53,6 @@ class Descent {
  private:
   enum class Kind { kUnknown, kFree, kMixed };
   using Box = BlockBox;
-  static constexpr std::size_t kMaxOthers = 8;
 
   // Tangent bounds of the field of view, each side moved in by `inset` beam widths.
   struct TanBounds {
@@ -74,7 +76,7 @@ class Descent {
   };
 
   MapHere ChildMap(const MapHere& map, unsigned depth, const std::array<int, 3>& key_min, int child,
-                   std::array<const MapNode*, 8>* next) const;
+                   std::array<const MapNode*, kMaxOthers>* next) const;
   // The history holds the whole block at or below the free clamp, and no other live
   // contribution says anything there.
   [[nodiscard]] bool Saturated(const MapHere& m) const;
@@ -180,11 +182,12 @@ inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key
   const double child_size = res * half;
   Eigen::Vector3d lo;
   for (int a = 0; a < 3; ++a) lo[a] = (key_min[a] - kMapKeyOffset) * res;
-  F4 point[27];
+  F4 point[kLatticePoints];
   CornerAngles(Rt_, origin_, lo, child_size, tess_.pinhole(), point);
   double near2[3][2], far2[3][2];
   SlabDistances(origin_, lo, child_size, near2, far2);
-  std::array<const MapNode*, 8> next = map.lo;
+  std::array<const MapNode*, kMaxOthers> next;
+  std::copy_n(map.lo.begin(), skip_ != nullptr ? skip_->others.size() : 0, next.begin());
   for (int child = 0; child < 8; ++child) {
     const int cx = child & 1, cy = (child >> 1) & 1, cz = (child >> 2) & 1;
     const MapHere child_map = ChildMap(map, depth, key_min, child, &next);
@@ -232,7 +235,7 @@ inline Descent::MapHere Descent::RootMap() const {
 
 inline Descent::MapHere Descent::ChildMap(const MapHere& map, unsigned depth,
                                           const std::array<int, 3>& key_min, int child,
-                                          std::array<const MapNode*, 8>* next) const {
+                                          std::array<const MapNode*, kMaxOthers>* next) const {
   MapHere c;
   if (skip_ == nullptr) return c;
   const octomap::OcTree& tree = *skip_->history;
@@ -244,7 +247,7 @@ inline Descent::MapHere Descent::ChildMap(const MapHere& map, unsigned depth,
     }
   }
   c.others_cover = map.others_cover;
-  if (c.others_cover) return c;
+  if (c.others_cover || skip_->others.empty()) return c;
   const octomap::OcTreeKey k(static_cast<octomap::key_type>(key_min[0]),
                              static_cast<octomap::key_type>(key_min[1]),
                              static_cast<octomap::key_type>(key_min[2]));
