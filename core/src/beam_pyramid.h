@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <utility>
 #include <vector>
@@ -23,15 +24,24 @@ struct Aggregate {
   std::uint32_t touched = 0;
   std::uint32_t beams = 0;
 
+  // The four floats at once (the pyramid's queries add many): lane 0 the minimum, lanes 1-3
+  // the maximum, each as std::min / std::max take it.
   void Add(const Aggregate& o) {
-    min_free_end = std::min(min_free_end, o.min_free_end);
-    max_free_end = std::max(max_free_end, o.max_free_end);
-    max_far = std::max(max_far, o.max_far);
-    max_free_value = std::max(max_free_value, o.max_free_value);
+    using F4 = float __attribute__((vector_size(16)));
+    F4 a, b;
+    std::memcpy(&a, this, sizeof a);  // the object's first 16 bytes: its four floats
+    std::memcpy(&b, &o, sizeof b);
+    const F4 lower = b < a ? b : a;
+    const F4 upper = a < b ? b : a;
+    const F4 sum = __builtin_shufflevector(lower, upper, 0, 5, 6, 7);
+    std::memcpy(static_cast<void*>(this), &sum, sizeof sum);
     touched += o.touched;
     beams += o.beams;
   }
 };
+static_assert(offsetof(Aggregate, min_free_end) == 0 && offsetof(Aggregate, max_free_end) == 4 &&
+                  offsetof(Aggregate, max_far) == 8 && offsetof(Aggregate, max_free_value) == 12,
+              "Aggregate::Add reads its four floats as one vector");
 
 // Min / max images of the beam grid, halved level by level: a rectangle of beams is answered
 // from at most 5 x 5 cells of the level where its larger side spans four cells.
