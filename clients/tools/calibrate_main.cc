@@ -47,6 +47,11 @@ Usage: fusion-calibrate RECORDING.frec... --sensor-id ID [options]
   --min-incidence C     rays whose |cos| to the plane's normal is below C are left out
                         (default 0.2: on grazing rays a small error of the plane or the
                         pose is a large error of the true range)
+  --local-patch M       the noise (q_sigma, eps) from residuals against local planes: each
+                        cloud's points in M x M cells of the target (e.g. 0.05 for a depth
+                        camera; a cell needs 12 points), so that the reference's error
+                        (tilted poses, a warped plane) does not count as sensor noise; the
+                        bias still comes from the target plane
   --preset NAME         also write `preset: NAME` (the geometry: field of view, beams)
   --plot FILE.png       residual against true range, inliers / outliers, the fitted bias
                         and its +-3 sigma band
@@ -76,7 +81,7 @@ struct Options {
   std::uint64_t degree = 2, bins = 12, max_points = 20000;
   double window_min_m = 0.0, window_max_m = fusion::CalibrationOptions::kInfinity;
   double near_m = 2.0, plane_inlier_m = 0.02, gate_m = 0.3, gate_fraction = 0.15;
-  double min_incidence_cos = 0.2;
+  double min_incidence_cos = 0.2, local_patch_m = 0.0;
   bool fit_plane_only = false, plane_per_cloud = false;
 };
 
@@ -128,14 +133,18 @@ bool ApplyValue(const std::string& arg, const std::string& v, Options* o, Status
       *s = Status::Error(arg + " must be in 1..100000000");
     }
   } else if (arg == "--r-min" || arg == "--r-max" || arg == "--near" || arg == "--plane-inlier" ||
-             arg == "--min-incidence") {
+             arg == "--min-incidence" || arg == "--local-patch") {
     double* d = arg == "--r-min"           ? &o->window_min_m
+                : arg == "--local-patch"   ? &o->local_patch_m
                 : arg == "--r-max"         ? &o->window_max_m
                 : arg == "--near"          ? &o->near_m
                 : arg == "--min-incidence" ? &o->min_incidence_cos
                                            : &o->plane_inlier_m;
     *s = cli::ParseDouble(arg, v, d);
     if (s->ok() && *d < 0.0) *s = Status::Error(arg + " must be >= 0");
+    if (s->ok() && arg == "--local-patch" && !(*d > 0.0)) {
+      *s = Status::Error("--local-patch must be > 0 (the cell edge in metres)");
+    }
     if (s->ok() && arg == "--min-incidence" && *d >= 1.0) {
       *s = Status::Error("--min-incidence must be below 1");
     }
@@ -376,10 +385,41 @@ void Report(const fusion::Calibration& fit, const fusion::PlaneSampleStats& stat
                fit.converged ? "converged" : "stopped (not converged)", fit.iterations);
 }
 
+// --local-patch: the local samples' residuals about the reference's bias, as the plot shows
+// them (the band is then the sensor's noise about its bias).
+std::vector<fusion::RangeSample> LocalPlotted(const std::vector<fusion::RangeSample>& local,
+                                              const fusion::Polynomial2& q_mu) {
+  std::vector<fusion::RangeSample> out = local;
+  for (fusion::RangeSample& s : out) s.reading_m += q_mu(s.true_range_m) - s.true_range_m;
+  return out;
+}
+
+void ReportLocal(const Options& o, const fusion::LocalSampleStats& stats,
+                 const fusion::Calibration& reference, const fusion::Calibration& local) {
+  std::fprintf(stderr,
+               "%s: --local-patch %.3f: %zu local samples in %zu cells (%zu points in cells "
+               "with too few left out); against the target plane alone sigma would be "
+               "%.1f / %.1f mm at %.2f / %.2f m, against local planes %.1f / %.1f mm, eps %.5f "
+               "against %.5f (the table's sigma columns: the local fit's)\n",
+               kTool, o.local_patch_m, stats.plane.samples, stats.cells, stats.sparse,
+               1000.0 * reference.q_sigma(reference.r_min_m),
+               1000.0 * reference.q_sigma(reference.r_max_m), reference.r_min_m, reference.r_max_m,
+               1000.0 * local.q_sigma(reference.r_min_m), 1000.0 * local.q_sigma(reference.r_max_m),
+               local.epsilon, reference.epsilon);
+}
+
 struct Samples {
   std::vector<fusion::RangeSample> samples;
   fusion::PlaneSampleStats stats;
+  std::vector<fusion::RangeSample> local_samples;  // --local-patch
+  fusion::LocalSampleStats local_stats;
 };
+
+void Add(const fusion::PlaneSampleStats& cloud, fusion::PlaneSampleStats* stats) {
+  stats->points += cloud.points, stats->missing += cloud.missing;
+  stats->parallel += cloud.parallel, stats->behind += cloud.behind;
+  stats->gated += cloud.gated, stats->samples += cloud.samples;
+}
 
 // The samples of every cloud against `plane`, or (--plane-per-cloud) against each cloud's own
 // dominant plane; clouds without one are left out, all of them without one is an error.
@@ -409,12 +449,17 @@ Status CollectSamples(const Options& o, CloudSource* source, fusion::PlaneCoeffi
                      cloud_index, PlaneText(plane).c_str(), fit.inliers, fit.points, fit.rms_m);
       }
     }
-    const auto cloud =
-        fusion::AppendPlaneSamples(xyz, n, T_world_sensor, plane, sample_options, &out->samples);
-    fusion::PlaneSampleStats& stats = out->stats;
-    stats.points += cloud.points, stats.missing += cloud.missing;
-    stats.parallel += cloud.parallel, stats.behind += cloud.behind;
-    stats.gated += cloud.gated, stats.samples += cloud.samples;
+    Add(fusion::AppendPlaneSamples(xyz, n, T_world_sensor, plane, sample_options, &out->samples),
+        &out->stats);
+    if (o.local_patch_m > 0.0) {
+      fusion::LocalPlaneOptions local;
+      local.patch_m = o.local_patch_m;
+      const auto cloud = fusion::AppendLocalPlaneSamples(xyz, n, T_world_sensor, plane,
+                                                         sample_options, local,
+                                                         &out->local_samples);
+      Add(cloud.plane, &out->local_stats.plane);
+      out->local_stats.cells += cloud.cells, out->local_stats.sparse += cloud.sparse;
+    }
   });
   if (!s.ok()) return s;
   if (clouds_without_plane == source->total()) return Status::Error(plane_error);
@@ -459,15 +504,30 @@ int Run(const Options& o) {
   options.bins = static_cast<int>(o.bins);
   options.window_min_m = o.window_min_m;
   options.window_max_m = o.window_max_m;
-  const fusion::Calibration fit = fusion::CalibrateForwardModel(samples, options);
+  fusion::Calibration fit = fusion::CalibrateForwardModel(samples, options);
   if (!fit.ok()) return cli::Fail(kTool, fit.error);
+  std::vector<fusion::RangeSample> plotted = samples;
+  if (o.local_patch_m > 0.0) {
+    const fusion::Calibration local = fusion::CalibrateForwardModel(got.local_samples, options);
+    if (!local.ok()) {
+      return cli::Fail(kTool, "--local-patch: " + local.error + " (" +
+                                  std::to_string(got.local_stats.sparse) +
+                                  " points lay in cells too sparse for a local plane: sparse "
+                                  "clouds need larger cells)");
+    }
+    ReportLocal(o, got.local_stats, fit, local);
+    plotted = LocalPlotted(got.local_samples, fit.q_mu);
+    fit = fusion::WithLocalNoise(fit, local);
+    fit.inlier_responsibility = local.inlier_responsibility;
+  }
   Report(fit, stats);
   if (!o.plot_path.empty()) {
     std::string error;
     char title[160];
-    std::snprintf(title, sizeof title, "fusion-calibrate %s: %zu samples, eps %.2g",
-                  o.sensor_id.c_str(), fit.samples, fit.epsilon);
-    if (!fusion::clients::WriteCalibrationPlot(o.plot_path, samples, fit, title, &error)) {
+    std::snprintf(title, sizeof title, "fusion-calibrate %s: %zu samples%s, eps %.2g",
+                  o.sensor_id.c_str(), plotted.size(),
+                  o.local_patch_m > 0.0 ? " (local residuals about the bias)" : "", fit.epsilon);
+    if (!fusion::clients::WriteCalibrationPlot(o.plot_path, plotted, fit, title, &error)) {
       return cli::Fail(kTool, "--plot: " + error);
     }
     std::fprintf(stderr, "%s: plot written to %s\n", kTool, o.plot_path.c_str());

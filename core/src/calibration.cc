@@ -6,9 +6,12 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <random>
 #include <stdexcept>
+#include <string>
+#include <utility>
 
 namespace fusion {
 namespace {
@@ -427,44 +430,64 @@ PlaneCoefficients NormalizedPlane(const PlaneCoefficients& plane) {
   return out;
 }
 
+namespace {
+
+// One point against a plane: its reading r, unit ray direction in the world, the true range t
+// where the ray meets the plane, or which of the stats' counters it goes to.
+struct PlaneReading {
+  std::size_t PlaneSampleStats::*counter = &PlaneSampleStats::samples;
+  double t = 0.0, r = 0.0;
+  Eigen::Vector3d ray_world = Eigen::Vector3d::Zero();
+};
+
+PlaneReading ReadPlane(const float* xyz, const Eigen::Isometry3d& T_world_sensor,
+                       const PlaneCoefficients& plane, const PlaneSampleOptions& options) {
+  PlaneReading out;
+  const Eigen::Vector3d p(xyz[0], xyz[1], xyz[2]);
+  out.r = p.norm();
+  if (!std::isfinite(out.r) || out.r < 1e-9) {
+    out.counter = &PlaneSampleStats::missing;
+    return out;
+  }
+  out.ray_world = T_world_sensor.linear() * (p / out.r);
+  const double cos_incidence = plane.head<3>().dot(out.ray_world);
+  if (std::abs(cos_incidence) < options.min_incidence_cos) {
+    out.counter = &PlaneSampleStats::parallel;
+    return out;
+  }
+  const double origin_side = plane.head<3>().dot(T_world_sensor.translation()) + plane[3];
+  out.t = -origin_side / cos_incidence;
+  if (!(out.t > 0.0)) {
+    out.counter = &PlaneSampleStats::behind;
+  } else if (std::abs(out.r - out.t) >
+             options.max_residual_m + options.max_residual_fraction * out.t) {
+    out.counter = &PlaneSampleStats::gated;
+  }
+  return out;
+}
+
+void CheckSampleArguments(const float* points_xyz, std::size_t point_count, const void* samples,
+                          const char* who) {
+  if ((points_xyz == nullptr && point_count > 0) || samples == nullptr) {
+    throw std::invalid_argument(std::string(who) + ": null points or samples");
+  }
+}
+
+}  // namespace
+
 PlaneSampleStats AppendPlaneSamples(const float* points_xyz, std::size_t point_count,
                                     const Eigen::Isometry3d& T_world_sensor,
                                     const PlaneCoefficients& plane_world,
                                     const PlaneSampleOptions& options,
                                     std::vector<RangeSample>* samples) {
-  if ((points_xyz == nullptr && point_count > 0) || samples == nullptr) {
-    throw std::invalid_argument("AppendPlaneSamples: null points or samples");
-  }
+  CheckSampleArguments(points_xyz, point_count, samples, "AppendPlaneSamples");
   const PlaneCoefficients plane = NormalizedPlane(plane_world);
-  const Eigen::Vector3d n = plane.head<3>();
-  const Eigen::Vector3d origin = T_world_sensor.translation();
-  const Eigen::Matrix3d R = T_world_sensor.linear();
-  const double origin_side = n.dot(origin) + plane[3];
   PlaneSampleStats stats;
   stats.points = point_count;
   for (std::size_t i = 0; i < point_count; ++i) {
-    const Eigen::Vector3d p(points_xyz[3 * i], points_xyz[3 * i + 1], points_xyz[3 * i + 2]);
-    const double r = p.norm();
-    if (!std::isfinite(r) || r < 1e-9) {
-      ++stats.missing;
-      continue;
-    }
-    const double cos_incidence = n.dot(R * (p / r));
-    if (std::abs(cos_incidence) < options.min_incidence_cos) {
-      ++stats.parallel;
-      continue;
-    }
-    const double t = -origin_side / cos_incidence;
-    if (!(t > 0.0)) {
-      ++stats.behind;
-      continue;
-    }
-    if (std::abs(r - t) > options.max_residual_m + options.max_residual_fraction * t) {
-      ++stats.gated;
-      continue;
-    }
-    samples->push_back({t, r});
-    ++stats.samples;
+    const PlaneReading hit = ReadPlane(points_xyz + 3 * i, T_world_sensor, plane, options);
+    ++(stats.*hit.counter);
+    if (hit.counter == &PlaneSampleStats::samples) samples->push_back({hit.t, hit.r});
   }
   return stats;
 }
@@ -572,6 +595,116 @@ PlaneFit FitDominantPlane(const std::vector<Eigen::Vector3d>& points_world,
     fit.error = text;
   }
   return fit;
+}
+
+
+namespace {
+
+struct CellPoint {
+  std::pair<std::int64_t, std::int64_t> cell;  // patch indices on the reference plane
+  Eigen::Vector3d point_world;
+  Eigen::Vector3d ray_world;
+  double t = 0.0, r = 0.0;
+};
+
+// The samples of one cell against its own plane (see AppendLocalPlaneSamples); false when the
+// cell has too few points for one.
+bool AppendCell(const std::vector<CellPoint>& cell, const Eigen::Vector3d& origin,
+                const PlaneCoefficients& reference, std::size_t min_points,
+                std::vector<RangeSample>* samples) {
+  if (cell.size() < min_points) return false;
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(cell.size());
+  for (const CellPoint& c : cell) points.push_back(c.point_world);
+  PlaneCoefficients local = reference;
+  if (!RefinePlane(points, CalibrationOptions::kInfinity, &local)) return false;
+  std::vector<double> distances;
+  for (const auto& p : points) distances.push_back(std::abs(local.head<3>().dot(p) + local[3]));
+  const double band = std::max(1e-5, 3.5 * kMadToSigma * Median(distances));
+  if (!RefinePlane(points, band, &local)) return false;
+  std::size_t kept = 0;
+  for (const auto& p : points) kept += std::abs(local.head<3>().dot(p) + local[3]) <= band;
+  if (kept < min_points) return false;
+  const double scale = std::sqrt(static_cast<double>(kept) / static_cast<double>(kept - 3));
+  const double origin_side = local.head<3>().dot(origin) + local[3];
+  for (const CellPoint& c : cell) {
+    const double cos_incidence = local.head<3>().dot(c.ray_world);
+    if (std::abs(cos_incidence) < 1e-6) continue;
+    const double t_local = -origin_side / cos_incidence;
+    samples->push_back({c.t, c.t + (c.r - t_local) * scale});
+  }
+  return true;
+}
+
+}  // namespace
+
+LocalSampleStats AppendLocalPlaneSamples(const float* points_xyz, std::size_t point_count,
+                                         const Eigen::Isometry3d& T_world_sensor,
+                                         const PlaneCoefficients& plane_world,
+                                         const PlaneSampleOptions& options,
+                                         const LocalPlaneOptions& local,
+                                         std::vector<RangeSample>* samples) {
+  CheckSampleArguments(points_xyz, point_count, samples, "AppendLocalPlaneSamples");
+  if (!(local.patch_m > 0.0) || local.min_points < 4) {
+    throw std::invalid_argument("AppendLocalPlaneSamples: patch_m must be > 0, min_points >= 4");
+  }
+  const PlaneCoefficients plane = NormalizedPlane(plane_world);
+  const Eigen::Vector3d e1 = plane.head<3>().unitOrthogonal();
+  const Eigen::Vector3d e2 = plane.head<3>().cross(e1);
+  LocalSampleStats stats;
+  stats.plane.points = point_count;
+  std::vector<CellPoint> on_plane;
+  for (std::size_t i = 0; i < point_count; ++i) {
+    const PlaneReading hit = ReadPlane(points_xyz + 3 * i, T_world_sensor, plane, options);
+    if (hit.counter != &PlaneSampleStats::samples) {
+      ++(stats.plane.*hit.counter);
+      continue;
+    }
+    CellPoint c;
+    c.point_world = T_world_sensor.translation() + hit.r * hit.ray_world;
+    c.cell = {static_cast<std::int64_t>(std::floor(e1.dot(c.point_world) / local.patch_m)),
+              static_cast<std::int64_t>(std::floor(e2.dot(c.point_world) / local.patch_m))};
+    c.ray_world = hit.ray_world;
+    c.t = hit.t;
+    c.r = hit.r;
+    on_plane.push_back(c);
+  }
+  std::sort(on_plane.begin(), on_plane.end(),
+            [](const CellPoint& a, const CellPoint& b) { return a.cell < b.cell; });
+  const std::size_t before = samples->size();
+  std::vector<CellPoint> cell;
+  for (std::size_t i = 0; i < on_plane.size();) {
+    cell.clear();
+    const auto key = on_plane[i].cell;
+    for (; i < on_plane.size() && on_plane[i].cell == key; ++i) cell.push_back(on_plane[i]);
+    if (AppendCell(cell, T_world_sensor.translation(), plane, local.min_points, samples)) {
+      ++stats.cells;
+    } else {
+      stats.sparse += cell.size();
+    }
+  }
+  stats.plane.samples = samples->size() - before;
+  return stats;
+}
+
+Calibration WithLocalNoise(const Calibration& reference, const Calibration& local) {
+  if (!reference.ok() || !local.ok()) {
+    throw std::invalid_argument("WithLocalNoise: both fits must have succeeded");
+  }
+  Calibration out = reference;
+  out.q_sigma = local.q_sigma;
+  out.epsilon = local.epsilon;
+  for (CalibrationBin& bin : out.bins) {
+    bin.fitted_sigma_m = out.q_sigma(bin.centre_m);
+    bin.measured_sigma_m = std::numeric_limits<double>::quiet_NaN();
+    for (const CalibrationBin& l : local.bins) {
+      if (bin.centre_m >= l.begin_m && bin.centre_m <= l.end_m) {
+        bin.measured_sigma_m = l.measured_sigma_m;
+        break;
+      }
+    }
+  }
+  return out;
 }
 
 }  // namespace fusion

@@ -134,6 +134,43 @@ PlaneSampleStats AppendPlaneSamples(const float* points_xyz, std::size_t point_c
                                     const PlaneSampleOptions& options,
                                     std::vector<RangeSample>* samples);
 
+// The sensor's own noise, apart from the reference's error. Against one reference plane the
+// residuals hold the reference's error too (a pose that tilts the floor, a plane that is not
+// flat): it varies slowly across the target, the sensor's noise from point to point. Local
+// samples take each point's true range from a plane fitted to its own neighbourhood: the
+// points of the same cloud in the same patch_m x patch_m cell of the reference plane (total
+// least squares, refitted without the points beyond 3.5 robust sigmas). Their residuals
+// r - t_local, scaled by sqrt(m / (m - 3)) for the plane's three fitted parameters (m points),
+// keep what varies within a cell and lose the bias, which moves the local plane with it: fit
+// the noise (q_sigma, eps) from them and the bias from the reference (WithLocalNoise).
+struct LocalPlaneOptions {
+  double patch_m = 0.1;         // cell edge on the reference plane, > 0
+  std::size_t min_points = 12;  // a cell with fewer points (after the refit) gives no samples
+};
+
+struct LocalSampleStats {
+  PlaneSampleStats plane;       // the points' selection, as AppendPlaneSamples; samples: appended
+  std::size_t cells = 0;        // cells that gave samples
+  std::size_t sparse = 0;       // points in cells with fewer than min_points: left out
+};
+
+// Appends one sample per point on the reference plane (selected as AppendPlaneSamples does) in
+// a cell with enough points: true_range_m the reference plane's t, reading_m = t + the scaled
+// residual against the local plane. Throws std::invalid_argument as AppendPlaneSamples, and for
+// patch_m <= 0 or min_points < 4.
+LocalSampleStats AppendLocalPlaneSamples(const float* points_xyz, std::size_t point_count,
+                                         const Eigen::Isometry3d& T_world_sensor,
+                                         const PlaneCoefficients& plane_world,
+                                         const PlaneSampleOptions& options,
+                                         const LocalPlaneOptions& local,
+                                         std::vector<RangeSample>* samples);
+
+// The model with the bias from `reference` (q_mu, the range it holds, samples, inliers,
+// log-likelihood, responsibilities: samples against the reference plane) and the noise from
+// `local` (q_sigma, eps: samples of AppendLocalPlaneSamples); each bin's sigmas are the local
+// fit's (measured: the local bin holding the bin's centre). Both must be ok().
+[[nodiscard]] Calibration WithLocalNoise(const Calibration& reference, const Calibration& local);
+
 // Appends the world-frame position of every finite point within near_m of the sensor (range
 // in the sensor frame) to *points_world: the candidates of FitDominantPlane.
 void AppendNearPointsWorld(const float* points_xyz, std::size_t point_count,
