@@ -11,6 +11,7 @@
 // The import is timed separately. Prints a markdown table.
 // Usage: tum_map_bench [--data DIR] [--resolution M] [--beams COLSxROWS] [--log-level LEVEL]
 //                      [--timeout S] [--pose-tolerance M,DEG] [--render-threads N]
+//                      [--model hand|kinect_v1]
 //   --data: the TUM folder (default <repo>/../shared/data/tum_fr2_pioneer_slam2); absent: exit 0
 //   --resolution: map voxel edge in metres (default 0.02); --beams: the Kinect's beam grid
 //   (default 640x480, one beam per pixel; 160x120 gives each beam a 4 x 4 block of pixels, every
@@ -18,7 +19,8 @@
 //   --log-level: fusiond's (default warn;
 //   other levels write its whole log to /tmp/tum_map_bench_fusiond.log); --timeout: seconds to
 //   wait for the service's map (default 900); --render-threads: map.render_threads of both
-//   maps (default: the service's, one fewer than the hardware threads).
+//   maps (default: the service's, one fewer than the hardware threads); --model: the sensor,
+//   hand (default: the hand-typed Kinect of e2e_tum_test.cc) or the kinect_v1 preset.
 //
 // The shared pieces live in tum_map_bench_*.h beside this file (tests/CMakeLists.txt makes one
 // program of each .cc file here): _common (options, configuration, tools), _recording (the
@@ -261,8 +263,12 @@ int RunAll(const Options& options, const std::string& dir) {
   if (service) rows.push_back(*service);
   if (core) rows.push_back(*core);
   rows.push_back(octomap);
-  std::printf("\n## Results at %.3f m, %d x %d beams (import, not compared: %.2f s)\n",
-              options.resolution_m, options.cols, options.rows, import->elapsed_s);
+  const std::string sensor = options.model == "kinect_v1"
+                                 ? "the kinect_v1 preset (640 x 480 pinhole beams)"
+                                 : "the hand-typed Kinect, " + std::to_string(options.cols) +
+                                       " x " + std::to_string(options.rows) + " beams";
+  std::printf("\n## Results at %.3f m, %s (import, not compared: %.2f s)\n",
+              options.resolution_m, sensor.c_str(), import->elapsed_s);
   PrintTable(rows, octomap);
   if (!service) std::printf("\n(the service row is missing: see section 1)\n");
   return service && core ? 0 : 1;

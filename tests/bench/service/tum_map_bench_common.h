@@ -81,6 +81,10 @@ struct Options {
   double pose_tolerance_deg = 0.0;
   // map.render_threads; -1: not set (the service's default, one fewer than the hardware threads).
   int render_threads = -1;
+  // The sensor's description: "hand" (the hand-typed Kinect of e2e_tum_test.cc on an angular
+  // grid of cols x rows beams) or "kinect_v1" (the preset: one beam per pixel, the model
+  // fusion-calibrate fitted on this recording).
+  std::string model = "hand";
 };
 
 // The repository root from this file's path (tests/bench/service/tum_map_bench_common.h).
@@ -95,6 +99,7 @@ inline std::string DefaultDataDir() {
 constexpr const char* kUsage =
     "usage: tum_map_bench [--data DIR] [--resolution M] [--beams COLSxROWS] [--log-level LEVEL]\n"
     "                     [--timeout S] [--pose-tolerance M,DEG] [--render-threads N]\n"
+    "                     [--model hand|kinect_v1]\n"
     "  --data        the TUM folder (default ../shared/data/tum_fr2_pioneer_slam2)\n"
     "  --resolution  map voxel edge, metres (default 0.02)\n"
     "  --beams       the Kinect's beam grid (default 640x480: one beam per pixel)\n"
@@ -104,7 +109,10 @@ constexpr const char* kUsage =
     "                it (default: the service's 0.01,1); wider ones let change detection judge\n"
     "                later frames against earlier ones\n"
     "  --render-threads  map.render_threads for fusiond and the in-process map (default: the\n"
-    "                service's, one fewer than the hardware threads, at least 1)\n";
+    "                service's, one fewer than the hardware threads, at least 1)\n"
+    "  --model       the sensor: hand (default; the hand-typed Kinect, sigma 6 mm at 2 m, eps\n"
+    "                0.02, on the --beams grid) or kinect_v1 (the preset: pinhole, one beam per\n"
+    "                pixel, the model fitted by fusion-calibrate; --beams does not apply)\n";
 
 inline bool ParseArgs(int argc, char** argv, Options* options) {
   options->data_dir = DefaultDataDir();
@@ -125,6 +133,12 @@ inline bool ParseArgs(int argc, char** argv, Options* options) {
         std::fprintf(stderr, "--beams wants COLSxROWS within 640x480, e.g. 160x120\n");
         return false;
       }
+    } else if (flag == "--model") {
+      if (value != "hand" && value != "kinect_v1") {
+        std::fprintf(stderr, "--model wants hand or kinect_v1\n");
+        return false;
+      }
+      options->model = value;
     } else if (flag == "--log-level") {
       options->log_level = value;
     } else if (flag == "--timeout") {
@@ -171,10 +185,14 @@ inline std::string LoadAverage() {
 
 // ---- configuration (the same file for fusiond and the in-process map) ----------------------
 
-// The Kinect of e2e_tum_test.cc with cols x rows beams: the FOV covers every pixel (principal
-// point off centre), sigma(r) = 0.0012 + 0.0019 (r - 0.4)^2 m.
-inline std::string ConfigText(const Options& options) {
-  const double resolution_m = options.resolution_m;
+// The sensor block: the kinect_v1 preset, or the Kinect of e2e_tum_test.cc with cols x rows
+// beams (the FOV covers every pixel, principal point off centre), sigma(r) = 0.0012 + 0.0019
+// (r - 0.4)^2 m.
+inline std::string SensorText(const Options& options) {
+  if (options.model == "kinect_v1") {
+    return "sensors { id: \"" + std::string(kSensorId) +
+           "\" preset: \"kinect_v1\" queue_depth: 20 }\n";
+  }
   const double fov_h_deg = 2.0 * std::atan(325.1 / 520.9) * 180.0 / kPi + 0.5;
   const double fov_v_deg = 2.0 * std::atan(249.7 / 521.0) * 180.0 / kPi + 0.5;
   const double s2 = 0.0019, s1 = -2.0 * 0.0019 * 0.4, s0 = 0.0012 + 0.0019 * 0.16;
@@ -185,8 +203,13 @@ inline std::string ConfigText(const Options& options) {
          << "  cols: " << options.cols << " rows: " << options.rows << " epsilon: 0.02\n"
          << "  q_mu { a2: 0 a1: 1 a0: 0 }\n"
          << "  q_sigma { a2: " << s2 << " a1: " << s1 << " a0: " << s0 << " }\n"
-         << "  queue_depth: 20 }\n"
-         << "map { resolution_m: " << resolution_m
+         << "  queue_depth: 20 }\n";
+  return config.str();
+}
+
+inline std::string ConfigText(const Options& options) {
+  std::ostringstream config;
+  config << SensorText(options) << "map { resolution_m: " << options.resolution_m
          << " render_interval_ms: 100 beam_cell_size_m: " << kBeamCellSizeM;
   if (options.pose_tolerance_m > 0.0) {
     config << " pose_tolerance_m: " << options.pose_tolerance_m
