@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "fusion/core/calibration.h"
+#include "../../support/calibration_boards.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
 
@@ -16,17 +17,7 @@ namespace {
 
 constexpr double kDegree = 3.14159265358979323846 / 180.0;
 
-sim::Scene BoardAt(double distance_m) {
-  sim::Scene scene;
-  sim::Rectangle board;
-  board.name = "board";
-  board.center_m = Eigen::Vector3d(distance_m, 0.0, 0.0);
-  board.axis_u = Eigen::Vector3d::UnitY();
-  board.axis_v = Eigen::Vector3d::UnitZ();
-  board.half_u_m = board.half_v_m = 10.0;
-  scene.AddRectangle(board);
-  return scene;
-}
+using testing::BoardAt;
 
 // The board x = distance_m turned by tilt about the vertical through (distance_m, 0, 0).
 PlaneCoefficients ReferenceOf(double distance_m, double tilt_rad) {

@@ -13,6 +13,7 @@
 #include "fusion/core/calibration.h"
 #include "fusion/core/world_map.h"
 #include "fusion/sim/experiment.h"
+#include "../../support/calibration_boards.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
 
@@ -22,17 +23,8 @@ namespace {
 constexpr double kResM = 0.02;
 constexpr double kBoardM = 3.0;
 
-sim::Scene BoardAt(double distance_m) {
-  sim::Scene scene;
-  sim::Rectangle board;
-  board.name = "board";
-  board.center_m = Eigen::Vector3d(distance_m, 0.0, 0.0);
-  board.axis_u = Eigen::Vector3d::UnitY();
-  board.axis_v = Eigen::Vector3d::UnitZ();
-  board.half_u_m = board.half_v_m = 4.0;  // fills the field of view at every distance here
-  scene.AddRectangle(board);
-  return scene;
-}
+// Fills the field of view at every distance here.
+sim::Scene BoardAt(double distance_m) { return testing::BoardAt(distance_m, 4.0); }
 
 sim::SensorRun StereoRun(const SensorSpec& spec, int frames, std::uint64_t seed) {
   sim::SensorRun run;

@@ -9,24 +9,14 @@
 #include <random>
 #include <vector>
 
+#include "../../support/calibration_boards.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
 
 namespace fusion {
 namespace {
 
-// A large board facing a sensor at the origin (world x forward), its plane x = distance_m.
-sim::Scene BoardAt(double distance_m) {
-  sim::Scene scene;
-  sim::Rectangle board;
-  board.name = "board";
-  board.center_m = Eigen::Vector3d(distance_m, 0.0, 0.0);
-  board.axis_u = Eigen::Vector3d::UnitY();
-  board.axis_v = Eigen::Vector3d::UnitZ();
-  board.half_u_m = board.half_v_m = 10.0;
-  scene.AddRectangle(board);
-  return scene;
-}
+using testing::BoardAt;
 
 PlaneCoefficients BoardPlane(double distance_m) { return {1.0, 0.0, 0.0, -distance_m}; }
 
