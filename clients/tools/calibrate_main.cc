@@ -518,7 +518,7 @@ int Run(const Options& o) {
     ReportLocal(o, got.local_stats, fit, local);
     plotted = LocalPlotted(got.local_samples, fit.q_mu);
     fit = fusion::WithLocalNoise(fit, local);
-    fit.inlier_responsibility = local.inlier_responsibility;
+    fit.inlier_responsibility = local.inlier_responsibility;  // the plot's colours, per `plotted`
   }
   Report(fit, stats);
   if (!o.plot_path.empty()) {

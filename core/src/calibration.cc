@@ -597,7 +597,6 @@ PlaneFit FitDominantPlane(const std::vector<Eigen::Vector3d>& points_world,
   return fit;
 }
 
-
 namespace {
 
 struct CellPoint {
@@ -607,15 +606,15 @@ struct CellPoint {
   double t = 0.0, r = 0.0;
 };
 
-// The samples of one cell against its own plane (see AppendLocalPlaneSamples); false when the
-// cell has too few points for one.
-bool AppendCell(const std::vector<CellPoint>& cell, const Eigen::Vector3d& origin,
+// The samples of one cell's points [begin, end) against its own plane (see
+// AppendLocalPlaneSamples); false when they are too few or degenerate for one.
+bool AppendCell(const CellPoint* begin, const CellPoint* end, const Eigen::Vector3d& origin,
                 const PlaneCoefficients& reference, std::size_t min_points,
                 std::vector<RangeSample>* samples) {
-  if (cell.size() < min_points) return false;
+  if (static_cast<std::size_t>(end - begin) < min_points) return false;
   std::vector<Eigen::Vector3d> points;
-  points.reserve(cell.size());
-  for (const CellPoint& c : cell) points.push_back(c.point_world);
+  points.reserve(static_cast<std::size_t>(end - begin));
+  for (const CellPoint* c = begin; c != end; ++c) points.push_back(c->point_world);
   PlaneCoefficients local = reference;
   if (!RefinePlane(points, CalibrationOptions::kInfinity, &local)) return false;
   std::vector<double> distances;
@@ -627,11 +626,11 @@ bool AppendCell(const std::vector<CellPoint>& cell, const Eigen::Vector3d& origi
   if (kept < min_points) return false;
   const double scale = std::sqrt(static_cast<double>(kept) / static_cast<double>(kept - 3));
   const double origin_side = local.head<3>().dot(origin) + local[3];
-  for (const CellPoint& c : cell) {
-    const double cos_incidence = local.head<3>().dot(c.ray_world);
+  for (const CellPoint* c = begin; c != end; ++c) {
+    const double cos_incidence = local.head<3>().dot(c->ray_world);
     if (std::abs(cos_incidence) < 1e-6) continue;
     const double t_local = -origin_side / cos_incidence;
-    samples->push_back({c.t, c.t + (c.r - t_local) * scale});
+    samples->push_back({c->t, c->t + (c->r - t_local) * scale});
   }
   return true;
 }
@@ -672,15 +671,14 @@ LocalSampleStats AppendLocalPlaneSamples(const float* points_xyz, std::size_t po
   std::sort(on_plane.begin(), on_plane.end(),
             [](const CellPoint& a, const CellPoint& b) { return a.cell < b.cell; });
   const std::size_t before = samples->size();
-  std::vector<CellPoint> cell;
-  for (std::size_t i = 0; i < on_plane.size();) {
-    cell.clear();
-    const auto key = on_plane[i].cell;
-    for (; i < on_plane.size() && on_plane[i].cell == key; ++i) cell.push_back(on_plane[i]);
-    if (AppendCell(cell, T_world_sensor.translation(), plane, local.min_points, samples)) {
+  for (std::size_t i = 0, j = 0; i < on_plane.size(); i = j) {
+    while (j < on_plane.size() && on_plane[j].cell == on_plane[i].cell) ++j;
+    const CellPoint* cell = on_plane.data();
+    if (AppendCell(cell + i, cell + j, T_world_sensor.translation(), plane, local.min_points,
+                   samples)) {
       ++stats.cells;
     } else {
-      stats.sparse += cell.size();
+      stats.sparse += j - i;
     }
   }
   stats.plane.samples = samples->size() - before;

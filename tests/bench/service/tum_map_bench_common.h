@@ -116,6 +116,7 @@ constexpr const char* kUsage =
 
 inline bool ParseArgs(int argc, char** argv, Options* options) {
   options->data_dir = DefaultDataDir();
+  bool beams_given = false;
   for (int i = 1; i < argc; i += 2) {
     const std::string flag = argv[i];
     if (i + 1 >= argc) {
@@ -128,6 +129,7 @@ inline bool ParseArgs(int argc, char** argv, Options* options) {
     } else if (flag == "--resolution") {
       options->resolution_m = std::atof(value.c_str());
     } else if (flag == "--beams") {
+      beams_given = true;
       if (std::sscanf(value.c_str(), "%dx%d", &options->cols, &options->rows) != 2 ||
           options->cols < 1 || options->rows < 1 || options->cols > 640 || options->rows > 480) {
         std::fprintf(stderr, "--beams wants COLSxROWS within 640x480, e.g. 160x120\n");
@@ -162,6 +164,10 @@ inline bool ParseArgs(int argc, char** argv, Options* options) {
       std::fprintf(stderr, "unknown flag %s\n", flag.c_str());
       return false;
     }
+  }
+  if (beams_given && options->model == "kinect_v1") {
+    std::fprintf(stderr, "--beams: the kinect_v1 preset has one beam per pixel (--model hand)\n");
+    return false;
   }
   if (!(options->resolution_m >= 0.001 && options->resolution_m <= 10.0)) {
     std::fprintf(stderr, "--resolution must lie in [0.001, 10] m\n");

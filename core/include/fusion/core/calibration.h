@@ -151,7 +151,7 @@ struct LocalPlaneOptions {
 struct LocalSampleStats {
   PlaneSampleStats plane;       // the points' selection, as AppendPlaneSamples; samples: appended
   std::size_t cells = 0;        // cells that gave samples
-  std::size_t sparse = 0;       // points in cells with fewer than min_points: left out
+  std::size_t sparse = 0;       // points in cells too sparse or degenerate for a plane
 };
 
 // Appends one sample per point on the reference plane (selected as AppendPlaneSamples does) in
