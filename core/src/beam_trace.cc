@@ -17,6 +17,9 @@ constexpr double kProbabilityFloor = 1e-9;
 constexpr double kPi = 3.14159265358979323846;
 // The longest stretch of a beam (cells) a tracer tabulates.
 constexpr std::uint32_t kMaxTableCells = 8192;
+// Beyond the shallowest incidence, a step into a neighbour still follows one surface when it
+// differs from the step into the beam from its other side by at most this share of itself.
+constexpr double kProgressionTolerance = 0.5;
 
 double Logit(double p) {
   p = std::clamp(p, kProbabilityFloor, 1.0 - kProbabilityFloor);
@@ -216,14 +219,27 @@ double BeamTracer::VoxelEntry(const Eigen::Vector3d& dir, double r) const {
   return std::min(t, r);
 }
 
-double BeamTracer::SurfaceStep(std::size_t beam, long neighbour, double spacing_rad) const {
+double BeamTracer::SurfaceStep(std::size_t beam, long neighbour, long opposite,
+                               double spacing_rad) const {
   const double m = profiles_[beam].median_m;
   const double n = profiles_[static_cast<std::size_t>(neighbour)].median_m;
   if (!std::isfinite(m) || !std::isfinite(n)) return 0.0;
   // On one surface seen at incidence alpha, neighbouring beams' ranges differ by about
-  // r * spacing / tan(alpha); more than the shallowest incidence allows is a depth edge.
-  if (std::abs(n - m) > continuity_ * spacing_rad * std::min(m, n)) return 0.0;
-  return n - m;
+  // r * spacing / tan(alpha); up to the shallowest incidence, the neighbour is on it.
+  const double step = n - m;
+  if (std::abs(step) <= continuity_ * spacing_rad * std::min(m, n)) return step;
+  // Steeper: a depth edge, unless the beam on the other side steps into this one alike. A floor
+  // seen at a grazing angle (a laser's, a degree or less) is a progression of ranges whose
+  // steps grow slowly from row to row (o < m < n, each step within a factor ~1.5 of the last);
+  // an edge is one jump between neighbours that agree.
+  if (opposite < 0) return 0.0;
+  const double o = profiles_[static_cast<std::size_t>(opposite)].median_m;
+  if (!std::isfinite(o)) return 0.0;
+  const double before = m - o;
+  if (!(before * step > 0.0) || std::abs(step - before) > kProgressionTolerance * std::abs(step)) {
+    return 0.0;
+  }
+  return step;
 }
 
 void BeamTracer::SurfaceSteps(std::size_t beam, const BeamProfile& profile, double* left,
@@ -239,10 +255,14 @@ void BeamTracer::SurfaceSteps(std::size_t beam, const BeamProfile& profile, doub
   const auto rows = static_cast<long>(tess.rows());
   const long b = static_cast<long>(beam);
   const long col = b % cols, row = b / cols;
-  if (col > 0) *left = SurfaceStep(beam, b - 1, tess.beam_width_h_rad());
-  if (col + 1 < cols) *right = SurfaceStep(beam, b + 1, tess.beam_width_h_rad());
-  if (row > 0) *up = SurfaceStep(beam, b - cols, tess.beam_width_v_rad());  // elevation +
-  if (row + 1 < rows) *down = SurfaceStep(beam, b + cols, tess.beam_width_v_rad());
+  const long left_beam = col > 0 ? b - 1 : -1, right_beam = col + 1 < cols ? b + 1 : -1;
+  const long up_beam = row > 0 ? b - cols : -1;  // elevation +
+  const long down_beam = row + 1 < rows ? b + cols : -1;
+  const double h = tess.beam_width_h_rad(), v = tess.beam_width_v_rad();
+  if (left_beam >= 0) *left = SurfaceStep(beam, left_beam, right_beam, h);
+  if (right_beam >= 0) *right = SurfaceStep(beam, right_beam, left_beam, h);
+  if (up_beam >= 0) *up = SurfaceStep(beam, up_beam, down_beam, v);
+  if (down_beam >= 0) *down = SurfaceStep(beam, down_beam, up_beam, v);
 }
 
 void BeamTracer::TabulateMass(std::size_t beam, const BeamProfile& profile, double reach_m) {

@@ -90,8 +90,9 @@ class BeamTracer {
   // Where the centre ray enters the voxel that holds range r (not before t_start()).
   double VoxelEntry(const Eigen::Vector3d& dir, double r) const;
   // Range change from beam b's surface to the neighbour's, 0 if the neighbour sees another
-  // surface (a depth edge) or none.
-  double SurfaceStep(std::size_t beam, long neighbour, double spacing_rad) const;
+  // surface (a depth edge) or none. `opposite`: the beam on b's other side along the same axis
+  // (-1: none), whose step into b tells a surface at grazing incidence from an edge.
+  double SurfaceStep(std::size_t beam, long neighbour, long opposite, double spacing_rad) const;
   // The four steps (0 where no surface is followed) of beam b.
   void SurfaceSteps(std::size_t beam, const BeamProfile& profile, double* left, double* right,
                     double* up, double* down) const;

@@ -34,6 +34,12 @@ BeamGridOptions SensorGridOptions(const WorldMapOptions& options) {
   return grid;
 }
 
+BeamGridOptions SensorGridOptions(const WorldMapOptions& options, const SensorSpec& spec) {
+  BeamGridOptions grid = SensorGridOptions(options);
+  if (spec.beam_prior_length_m > 0.0) grid.prior_reference_length_m = spec.beam_prior_length_m;
+  return grid;
+}
+
 RenderOptions MapRenderOptions(const WorldMapOptions& options) {
   RenderOptions render = options.render;
   render.resolution_m = options.resolution_m;
@@ -330,7 +336,7 @@ MapStatus WorldMap::Integrate(const std::string& sensor_id, const Eigen::Isometr
   if (s == nullptr) return MapStatus::kUnknownSensor;
   if (!s->periods) {
     s->periods = std::make_unique<SensorPeriods>(
-        s->spec, SensorGridOptions(options_), options_.pose_tolerance_m,
+        s->spec, SensorGridOptions(options_, s->spec), options_.pose_tolerance_m,
         options_.pose_tolerance_rad, options_.resolution_m);
   }
   PeriodIntegration result;

@@ -232,6 +232,7 @@ Status ApplySpecFields(const fusion::v1::SensorConfig& c, bool from_camera_info,
   if (c.has_q_mu()) spec->q_mu = PolynomialFromConfig(c.q_mu());
   if (c.has_q_sigma()) spec->q_sigma = PolynomialFromConfig(c.q_sigma());
   if (c.has_epsilon()) spec->epsilon = c.epsilon();
+  if (c.has_beam_prior_length_m()) spec->beam_prior_length_m = c.beam_prior_length_m();
   return CheckSpec(c, *spec);
 }
 

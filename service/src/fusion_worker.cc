@@ -110,7 +110,7 @@ Status FusionWorker::AddBeamGridLocked(Lane& lane, const SensorSpec& spec) {
     return Status::Error("sensor '" + id + "': " + MapStatusName(status));
   }
   auto periods = std::make_unique<SensorPeriods>(
-      spec, SensorGridOptions(options_.map), options_.map.pose_tolerance_m,
+      spec, SensorGridOptions(options_.map, spec), options_.map.pose_tolerance_m,
       options_.map.pose_tolerance_rad, options_.map.resolution_m);
   {
     std::lock_guard<std::mutex> lock(lane.spec_mutex);

@@ -51,6 +51,7 @@ struct Options {
   double scan_resolution_m = 0.05;
   double pcd_resolution_m = 0.01;
   int stride = 4;
+  int scan_cols = 0, scan_rows = 0;  // the scan's beam grid; 0: the laser_3d preset's
   std::string only;  // empty: every part; else a comma-separated list of tum, scan, pcd
   [[nodiscard]] bool Runs(const std::string& part) const {
     return only.empty() || ("," + only + ",").find("," + part + ",") != std::string::npos;
@@ -59,12 +60,17 @@ struct Options {
 
 constexpr const char* kUsage =
     "usage: accuracy_real [--data DIR] [--resolution M] [--stride N] [--scan-resolution M]\n"
-    "                     [--pcd-resolution M] [--only tum,scan,pcd]\n"
+    "                     [--pcd-resolution M] [--beam-prior M] [--scan-grid COLSxROWS]\n"
+    "                     [--only tum,scan,pcd]\n"
     "  --data        the real recordings (default ../shared/data beside the project)\n"
     "  --resolution  map voxel edge in metres (default 0.02)\n"
     "  --stride      TUM: every N-th pixel in both directions (default 4; 1 = every pixel)\n"
     "  --scan-resolution  the laser scan's map voxel edge in metres (default 0.05)\n"
     "  --pcd-resolution   the PCD stereo frame's map voxel edge in metres (default 0.01)\n"
+    "  --beam-prior  the maps' beam prior length in metres, for sensors without their own\n"
+    "                (default 1; the laser_3d preset brings 5)\n"
+    "  --scan-grid   the laser scan's beams across x up over the preset's field of view\n"
+    "                (default the laser_3d preset's 368x512)\n"
     "  --only        the parts to run, comma-separated: tum, scan, pcd (default all)\n"
     "environment: ACCURACY_REAL_PLANES=1 lists every plane FindPlanes finds\n";
 
@@ -89,6 +95,13 @@ bool ParseArgs(int argc, char** argv, Options* o) {
       o->resolution_m = std::atof(value.c_str());
     } else if (flag == "--beam-prior") {
       g_beam_prior_m = std::atof(value.c_str());
+    } else if (flag == "--scan-grid") {
+      if (std::sscanf(value.c_str(), "%dx%d", &o->scan_cols, &o->scan_rows) != 2 ||
+          o->scan_cols < 1 || o->scan_rows < 1 || o->scan_cols > 4096 || o->scan_rows > 4096) {
+        std::fprintf(stderr, "--scan-grid wants COLSxROWS, each 1..4096 (got %s)\n",
+                     value.c_str());
+        return false;
+      }
     } else if (flag == "--scan-resolution") {
       o->scan_resolution_m = std::atof(value.c_str());
     } else if (flag == "--pcd-resolution") {
@@ -622,8 +635,10 @@ int RunScanGrid(const Options& o) {
   };
   const std::pair<std::string, fusion::SensorSpec> grids[] = {
       {"symmetric, 184 x 64.5 degrees at 0.1 degree", symmetric},
+      {"asymmetric 184 x 41 degrees at 0.5 degree", coarser(368, 82)},
       {"asymmetric 184 x 41 degrees at 0.25 degree", coarser(736, 164)},
-      {"laser_3d: asymmetric 184 x 41 degrees at 0.5 degree", *fusion::SensorPreset("laser_3d")},
+      {"laser_3d: asymmetric 184 x 41 degrees, 0.5 degree across, 0.08 degree up",
+       *fusion::SensorPreset("laser_3d")},
   };
   for (const auto& [name, spec] : grids) {
     fusion::BeamGrid grid(spec, options);
@@ -633,7 +648,9 @@ int RunScanGrid(const Options& o) {
   }
   // The map: ours with the laser_3d preset against OctoMap's, every return (no max range).
   const std::vector<Frame> frames = {scan};
-  const auto ours = MapWithCore(*fusion::SensorPreset("laser_3d"), o.scan_resolution_m, frames);
+  const fusion::SensorSpec laser =
+      o.scan_cols > 0 ? coarser(o.scan_cols, o.scan_rows) : *fusion::SensorPreset("laser_3d");
+  const auto ours = MapWithCore(laser, o.scan_resolution_m, frames);
   if (!ours) {
     std::fprintf(stderr, "laser scan: the map refused the sensor or the scan\n");
     return 1;
@@ -641,9 +658,9 @@ int RunScanGrid(const Options& o) {
   const Built octomap = MapWithOctoMap(o.scan_resolution_m, -1.0, frames);
   const fusion::v1::MapConfig config = fusion::service::DefaultConfig().map();  // a copy: not a temporary's member
   const Classes classes{LogOdds(config.occupied_threshold()), LogOdds(config.free_threshold())};
-  std::printf("\nmaps at %.3f m: ours (laser_3d) %zu occupied voxels in %.2f s, OctoMap %zu in "
-              "%.2f s\n",
-              o.scan_resolution_m, OccupiedVoxels(*ours->tree, config.occupied_threshold()).size(),
+  std::printf("\nmaps at %.3f m: ours (laser_3d, %d x %d beams) %zu occupied voxels in %.2f s, "
+              "OctoMap %zu in %.2f s\n",
+              o.scan_resolution_m, laser.cols, laser.rows, OccupiedVoxels(*ours->tree, config.occupied_threshold()).size(),
               ours->time_s, OccupiedVoxels(*octomap.tree, 0.5).size(), octomap.time_s);
   PrintBands(CompareByBand(*ours->tree, classes, *octomap.tree, scan.T_world_sensor.translation(),
                            {0.0, 2.0, 5.0, 10.0, 20.0, 30.0}));

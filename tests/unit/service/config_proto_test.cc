@@ -94,6 +94,8 @@ TEST(ConfigProtoTest, SensorMapAndIngestErrorsNameTheirField) {
       {"sensors { id: \"a\" preset: \"sr3000\" queue_depth: 0 }", "sensors[0].queue_depth"},
       {"sensors { id: \"a\" preset: \"laser_3d\" azimuth_min_deg: -30 }",
        "sensors[0].azimuth_min_deg"},
+      {"sensors { id: \"a\" preset: \"sr3000\" beam_prior_length_m: -2 }",
+       "sensors[0].beam_prior_length_m"},
       {"sensors { id: \"a\" preset: \"sr3000\" fov_v_deg: 20 elevation_min_deg: -5 "
        "elevation_max_deg: 5 }",
        "sensors[0].fov_v_deg"},
@@ -220,6 +222,14 @@ TEST(ConfigProtoTest, PinholeAndAsymmetricSensorsBecomeCoreSpecs) {
   EXPECT_NEAR(scan->spec.azimuth_centre_rad, -15.0 * M_PI / 180.0, 1e-12);
   EXPECT_NEAR(scan->spec.fov_v_rad, 39.0 * M_PI / 180.0, 1e-12);
   EXPECT_NEAR(scan->spec.elevation_centre_rad, 12.5 * M_PI / 180.0, 1e-12);
+  // The preset's own beam prior, and a sensor's set in the file over the map's.
+  EXPECT_EQ(scan->spec.beam_prior_length_m, 5.0);
+  EXPECT_EQ(kinect->spec.beam_prior_length_m, 0.0);
+  fusion::v1::SensorConfig own = config.sensors(0);
+  own.set_beam_prior_length_m(2.5);
+  auto with_prior = SensorSetupFromConfig(own);
+  ASSERT_TRUE(with_prior.ok()) << with_prior.status().message();
+  EXPECT_EQ(with_prior->spec.beam_prior_length_m, 2.5);
 }
 
 TEST(ConfigProtoTest, SensorFlagAddsAPresetSensor) {

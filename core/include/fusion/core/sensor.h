@@ -72,6 +72,11 @@ struct SensorSpec {
   Polynomial2 q_sigma{0.0, 0.0, 0.01};  // reading standard deviation at range r
   double epsilon = 0.01;                // paper's eps (total mass of the outlier part)
   double delta = 3.0;                   // paper's Delta: ROI half-width in sigmas
+  // The beam prior of this sensor's beams (docs/mapping.md, "The beam prior"): a run of this
+  // many metres holds a surface with probability 0.5 before any reading. 0 (the default): the
+  // map's (WorldMapOptions::beam_prior_length_m). A laser that sees far in open space wants a
+  // longer prior than a camera (laser_3d: 5 m); otherwise in (0, 1000].
+  double beam_prior_length_m = 0.0;
   ClassicBeamParams classic;            // used when model == kClassicBeam
   // True when the sensor has no maximum range (stereo, paper Table I: r_max = inf). Such a
   // sensor never reports "no return": a point is the outcome `beyond` only when the caller
@@ -90,7 +95,8 @@ void SetAngularLimits(double azimuth_min_rad, double azimuth_max_rad, double ele
                       double elevation_max_rad, SensorSpec* spec);
 
 // Empty string if the spec can be used to build a forward model / beam grid, otherwise the
-// reason: r_min >= 0, r_max > r_min, 0 < epsilon < 1, delta > 0, 0 < fov_h <= 2 pi,
+// reason: r_min >= 0, r_max > r_min, 0 < epsilon < 1, delta > 0, beam_prior_length_m 0 or in
+// (0, 1000], 0 < fov_h <= 2 pi,
 // 0 < fov_v < pi, the field of view within azimuth [-pi, pi] and elevation (-pi/2, pi/2),
 // cols, rows >= 1, a pinhole's focal lengths > 0, image >= 1 x 1, stride >= 1 and cols / rows
 // its strided image's, classic weights >= 0 with a positive sum, sigma_hit > 0.

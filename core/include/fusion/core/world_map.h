@@ -107,8 +107,11 @@ struct WorldMapOptions {
   [[nodiscard]] bool IsValid(std::string* why = nullptr) const;
 };
 
-// The beam grid options a sensor of this map gets (the beam prior applied).
+// The beam grid options a sensor of this map gets (the map's beam prior applied).
 [[nodiscard]] BeamGridOptions SensorGridOptions(const WorldMapOptions& options);
+// The same for `spec`: its own beam prior when it names one (SensorSpec::beam_prior_length_m).
+[[nodiscard]] BeamGridOptions SensorGridOptions(const WorldMapOptions& options,
+                                                const SensorSpec& spec);
 // The render options of this map (its resolution applied).
 [[nodiscard]] RenderOptions MapRenderOptions(const WorldMapOptions& options);
 
