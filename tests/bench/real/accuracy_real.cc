@@ -70,7 +70,7 @@ constexpr const char* kUsage =
     "  --beam-prior  the maps' beam prior length in metres, for sensors without their own\n"
     "                (default 1; the laser_3d preset brings 5)\n"
     "  --scan-grid   the laser scan's beams across x up over the preset's field of view\n"
-    "                (default the laser_3d preset's 368x512)\n"
+    "                (default the laser_3d preset's 368x2048)\n"
     "  --only        the parts to run, comma-separated: tum, scan, pcd (default all)\n"
     "environment: ACCURACY_REAL_PLANES=1 lists every plane FindPlanes finds\n";
 
@@ -633,13 +633,18 @@ int RunScanGrid(const Options& o) {
     s.rows = rows;
     return s;
   };
-  const std::pair<std::string, fusion::SensorSpec> grids[] = {
+  std::vector<std::pair<std::string, fusion::SensorSpec>> grids = {
       {"symmetric, 184 x 64.5 degrees at 0.1 degree", symmetric},
       {"asymmetric 184 x 41 degrees at 0.5 degree", coarser(368, 82)},
       {"asymmetric 184 x 41 degrees at 0.25 degree", coarser(736, 164)},
-      {"laser_3d: asymmetric 184 x 41 degrees, 0.5 degree across, 0.08 degree up",
+      {"laser_3d: asymmetric 184 x 41 degrees, 0.5 degree across, 0.02 degree up",
        *fusion::SensorPreset("laser_3d")},
   };
+  if (o.scan_cols > 0) {
+    grids.emplace_back("--scan-grid " + std::to_string(o.scan_cols) + "x" +
+                           std::to_string(o.scan_rows),
+                       coarser(o.scan_cols, o.scan_rows));
+  }
   for (const auto& [name, spec] : grids) {
     fusion::BeamGrid grid(spec, options);
     const fusion::IntegrationStats stats = grid.Integrate(scan.xyz.data(), scan.xyz.size() / 3);
