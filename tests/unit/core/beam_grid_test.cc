@@ -154,5 +154,53 @@ TEST(UpdateEachBeamTest, SameAsOneUpdatePerBeam) {
   EXPECT_THROW(a.UpdateEachBeam(std::vector<Reading>(3)), std::invalid_argument);
 }
 
+// Beams are made when first updated (beam_store_of.h): an untouched beam costs a slot, and
+// reads of it answer what a made beam at its prior does.
+TEST(BeamGridTest, UntouchedBeamsCostASlotAndReadAsThePrior) {
+  for (BeamRepresentation rep :
+       {BeamRepresentation::kDense, BeamRepresentation::kUnrolledLinkedList}) {
+    SensorSpec coarse = *SensorPreset("laser_3d");
+    coarse.rows = 82;
+    const SensorSpec fine = *SensorPreset("laser_3d");  // 368 x 2048
+    const BeamGrid small(coarse, Options(rep));
+    const BeamGrid large(fine, Options(rep));
+    const std::size_t extra_beams = large.beam_count() - small.beam_count();
+    EXPECT_LT(large.MemoryBytes() - small.MemoryBytes(), 8 * extra_beams) << static_cast<int>(rep);
+
+    BeamGrid grid(Small(), Options(rep));
+    grid.Update(3, {Reading::Kind::kRange, 2.0});
+    grid.Reset();  // beam 3 made, back at the prior; beam 4 never made
+    EXPECT_FALSE(grid.Touched(3));
+    EXPECT_FALSE(grid.Touched(4));
+    EXPECT_EQ(grid.FirstHitProbabilities(3), grid.FirstHitProbabilities(4));
+    EXPECT_EQ(grid.CellProbabilities(3), grid.CellProbabilities(4));
+    const std::vector<double> bounds = {0.5, 1.0, 2.0, 4.0};
+    std::vector<double> made, unmade;
+    grid.IntervalOccupancy(3, bounds, &made);
+    grid.IntervalOccupancy(4, bounds, &unmade);
+    EXPECT_EQ(made, unmade);
+    EXPECT_EQ(grid.InformationEndM(3, 0.5, 0.01), grid.InformationEndM(4, 0.5, 0.01));
+  }
+}
+
+// The order in which beams are first updated (and so made) does not change them.
+TEST(BeamGridTest, BeamsDoNotDependOnTheOrderTheyWereMade) {
+  BeamGrid forward(Small(), Options(BeamRepresentation::kUnrolledLinkedList));
+  BeamGrid backward(Small(), Options(BeamRepresentation::kUnrolledLinkedList));
+  const std::size_t n = forward.beam_count();
+  for (std::size_t b = 0; b < n; ++b) {
+    forward.Update(b, {Reading::Kind::kRange, 1.0 + 0.05 * static_cast<double>(b)});
+  }
+  for (std::size_t b = n; b-- > 0;) {
+    backward.Update(b, {Reading::Kind::kRange, 1.0 + 0.05 * static_cast<double>(b)});
+  }
+  forward.Update(7, {Reading::Kind::kRange, 2.5});
+  backward.Update(7, {Reading::Kind::kRange, 2.5});
+  for (std::size_t b = 0; b < n; ++b) {
+    EXPECT_TRUE(backward.Touched(b));
+    EXPECT_EQ(forward.FirstHitProbabilities(b), backward.FirstHitProbabilities(b)) << b;
+  }
+}
+
 }  // namespace
 }  // namespace fusion
