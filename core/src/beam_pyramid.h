@@ -50,20 +50,47 @@ class BeamPyramid {
   // Rectangles of at most this many beams are read beam by beam, larger ones from the pyramid.
   static constexpr int kExactBeams = 32;
 
+  BeamPyramid() = default;
   BeamPyramid(int cols, int rows, std::vector<Aggregate> beams) {
     levels_.push_back({cols, rows, std::move(beams)});
-    while (levels_.back().cols > 1 || levels_.back().rows > 1) {
-      const Level& below = levels_.back();
-      Level up{(below.cols + 1) / 2, (below.rows + 1) / 2, {}};
-      up.cells.resize(static_cast<std::size_t>(up.cols) * up.rows);
+    Build();
+  }
+
+  // Level 0 for cols x rows beams, every aggregate empty, to be filled before Build (the
+  // levels' memory is kept from the pyramid before: a sensor's renders reuse it).
+  std::vector<Aggregate>& Beams(int cols, int rows) {
+    if (levels_.empty()) levels_.emplace_back();
+    levels_[0].cols = cols;
+    levels_[0].rows = rows;
+    levels_[0].cells.assign(static_cast<std::size_t>(cols) * rows, Aggregate{});
+    return levels_[0].cells;
+  }
+
+  // The levels above 0, each halving the one below, up to a single cell.
+  void Build() {
+    std::size_t l = 0;
+    while (levels_[l].cols > 1 || levels_[l].rows > 1) {
+      if (levels_.size() == l + 1) levels_.emplace_back();
+      const Level& below = levels_[l];
+      Level& up = levels_[l + 1];
+      up.cols = (below.cols + 1) / 2;
+      up.rows = (below.rows + 1) / 2;
+      up.cells.assign(static_cast<std::size_t>(up.cols) * up.rows, Aggregate{});
       for (int r = 0; r < below.rows; ++r) {
         for (int c = 0; c < below.cols; ++c) {
           up.cells[static_cast<std::size_t>(r / 2) * up.cols + c / 2].Add(
               below.cells[static_cast<std::size_t>(r) * below.cols + c]);
         }
       }
-      levels_.push_back(std::move(up));
+      ++l;
     }
+    levels_.resize(l + 1);
+  }
+
+  [[nodiscard]] std::size_t MemoryBytes() const {
+    std::size_t bytes = 0;
+    for (const Level& level : levels_) bytes += level.cells.capacity() * sizeof(Aggregate);
+    return bytes;
   }
 
   [[nodiscard]] const Aggregate& Beam(int col, int row) const {
@@ -91,8 +118,8 @@ class BeamPyramid {
 
  private:
   struct Level {
-    int cols;
-    int rows;
+    int cols = 0;
+    int rows = 0;
     std::vector<Aggregate> cells;
   };
   std::vector<Level> levels_;

@@ -40,9 +40,16 @@ double ShiftAt(double f, double minus, double plus) { return f >= 0.0 ? f * plus
 
 std::vector<BeamProfile> ProfileBeams(const BeamGrid& grid, const RenderOptions& options,
                                       double t_start, std::size_t workers) {
+  std::vector<BeamProfile> profiles;
+  ProfileBeams(grid, options, t_start, workers, &profiles);
+  return profiles;
+}
+
+void ProfileBeams(const BeamGrid& grid, const RenderOptions& options, double t_start,
+                  std::size_t workers, std::vector<BeamProfile>* out) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  std::vector<BeamProfile> profiles(grid.beam_count(),
-                                    {kInf, kInf, -kInf, std::numeric_limits<double>::quiet_NaN()});
+  out->assign(grid.beam_count(), {kInf, kInf, -kInf, std::numeric_limits<double>::quiet_NaN()});
+  std::vector<BeamProfile>& profiles = *out;
   const auto cols = static_cast<std::size_t>(grid.tessellation().cols());
   ForEachRowBlock(static_cast<std::size_t>(grid.tessellation().rows()), workers,
                   [&](std::size_t, const std::vector<std::size_t>& rows) {
@@ -54,7 +61,6 @@ std::vector<BeamProfile> ProfileBeams(const BeamGrid& grid, const RenderOptions&
                       }
                     }
                   });
-  return profiles;
 }
 
 BeamTracer::BeamTracer(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,

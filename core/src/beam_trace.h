@@ -56,6 +56,9 @@ struct BeamTrace {
 
 // Every touched beam's profile from `t_start` (BeamGrid::Profile), untouched ones with
 // mass_begin_m = +infinity and median_m = NaN; computed on `workers` threads.
+// Into *profiles (its memory reused).
+void ProfileBeams(const BeamGrid& grid, const RenderOptions& options, double t_start,
+                  std::size_t workers, std::vector<BeamProfile>* profiles);
 [[nodiscard]] std::vector<BeamProfile> ProfileBeams(const BeamGrid& grid,
                                                     const RenderOptions& options, double t_start,
                                                     std::size_t workers);

@@ -29,8 +29,9 @@ class Descent {
   // mass; t_start: where every ray starts; global_far: the largest Aggregate::max_far.
   Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
           const RenderOptions& options, const BeamPyramid& pyramid, const LocalGrid& traced,
-          double t_start, float global_far, const SaturatedFree* skip, RenderedGrid* out,
-          RenderStats* stats);
+          double t_start, float global_far, const SaturatedFree* skip,
+          std::vector<Eigen::Vector3f>* directions, std::vector<std::uint8_t>* have_direction,
+          RenderedGrid* out, RenderStats* stats);
 
   static constexpr std::size_t kMaxOthers = 8;
 
@@ -117,8 +118,9 @@ class Descent {
   TanBounds fov_{}, known_near_{}, known_far_{};
   std::vector<double> col_centres_;  // tangent of each column's centre azimuth, ascending
   std::vector<double> row_centres_;  // tangent of each row's centre elevation, descending
-  std::vector<Eigen::Vector3f> directions_;
-  std::vector<std::uint8_t> have_direction_;
+  std::vector<Eigen::Vector3f>& directions_;
+  std::vector<std::uint8_t>& have_direction_;
+  bool directions_ready_ = false;  // have_direction_ cleared for this render
   double r_split2_ = 0.0;
   double t_start2_ = 0.0;
   double global_far2_ = 0.0;
@@ -137,7 +139,9 @@ std::size_t g_counts[17][3][2];
 inline Descent::Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                         const RenderOptions& options, const BeamPyramid& pyramid,
                         const LocalGrid& traced, double t_start, float global_far,
-                        const SaturatedFree* skip, RenderedGrid* out, RenderStats* stats)
+                        const SaturatedFree* skip, std::vector<Eigen::Vector3f>* directions,
+                        std::vector<std::uint8_t>* have_direction, RenderedGrid* out,
+                        RenderStats* stats)
     : tess_(grid.tessellation()),
       skip_(skip != nullptr && skip->history != nullptr && skip->others.size() <= kMaxOthers
                 ? skip
@@ -151,7 +155,9 @@ inline Descent::Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_s
       t_start_(t_start),
       global_far_(global_far),
       out_(out),
-      stats_(stats) {
+      stats_(stats),
+      directions_(*directions),
+      have_direction_(*have_direction) {
   // Known space ends where the outermost rays of the ray-traced render run: the centre lines of
   // the edge beams, and beyond r_split (where beams outgrow a voxel) their outermost sub-rays,
   // 1 / (2 k) of a beam from the edge of the field of view.
@@ -396,9 +402,10 @@ inline Aggregate Descent::CentreLinesThrough(const Box& box, int c0, int c1, int
 }
 
 inline const Eigen::Vector3f& Descent::WorldDirection(std::size_t beam) {
-  if (directions_.empty()) {
+  if (!directions_ready_) {
     directions_.resize(tess_.beam_count());
     have_direction_.assign(tess_.beam_count(), 0);
+    directions_ready_ = true;
   }
   if (have_direction_[beam] == 0) {
     directions_[beam] = (R_ * tess_.Direction(beam)).cast<float>();
@@ -422,9 +429,11 @@ inline void Descent::Emit(unsigned depth, const std::array<int, 3>& key_min, flo
 void DescendOctree(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                    const RenderOptions& options, const BeamPyramid& pyramid,
                    const LocalGrid& traced, double t_start, float global_far,
-                   const SaturatedFree* skip, RenderedGrid* out, RenderStats* stats) {
-  Descent descent(grid, T_world_sensor, options, pyramid, traced, t_start, global_far, skip, out,
-                  stats);
+                   const SaturatedFree* skip, std::vector<Eigen::Vector3f>* directions,
+                   std::vector<std::uint8_t>* have_direction, RenderedGrid* out,
+                   RenderStats* stats) {
+  Descent descent(grid, T_world_sensor, options, pyramid, traced, t_start, global_far, skip,
+                  directions, have_direction, out, stats);
   Aggregate everything;
   everything.touched = everything.beams = 1;
   descent.VisitChildren(0, {0, 0, 0}, everything, /*free_through=*/false, descent.RootMap());

@@ -11,17 +11,12 @@
 #include "beam_pyramid.h"
 #include "beam_trace.h"
 #include "projective_descent.h"
+#include "render_scratch.h"
 
 namespace fusion {
 namespace {
 
 using detail::Aggregate;
-
-// The voxels the rays crossed in the beams' first-hit mass, and the counters of that work.
-struct TracedMasses {
-  LocalGrid traced;
-  RenderStats stats;
-};
 
 // One touched beam: its rays traced through its first-hit mass into *part, and what the pyramid
 // keeps of it. clamp: RenderOptions::max_abs_log_odds.
@@ -53,13 +48,21 @@ Aggregate TraceBeamMass(std::size_t beam, const BeamProfile& profile, float clam
 }
 
 // Every beam's rays through its first-hit mass, rows dealt to `workers` threads, each into its
-// own grid (merged at the end); (*beams)[b] becomes beam b's Aggregate.
-TracedMasses TraceMasses(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-                         const RenderOptions& options, const std::vector<BeamProfile>& profiles,
-                         std::size_t workers, std::vector<Aggregate>* beams) {
+// own grid of *traced (merged into (*traced)[0] at the end; their memory reused); (*beams)[b]
+// becomes beam b's Aggregate. Returns the counters of that work.
+RenderStats TraceMasses(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
+                        const RenderOptions& options, const std::vector<BeamProfile>& profiles,
+                        std::size_t workers, std::vector<LocalGrid>* traced,
+                        std::vector<Aggregate>* beams) {
   const auto rows = static_cast<std::size_t>(grid.tessellation().rows());
   const auto cols = static_cast<std::size_t>(grid.tessellation().cols());
-  std::vector<LocalGrid> parts(workers, LocalGrid(options.resolution_m, options.combine));
+  std::vector<LocalGrid>& parts = *traced;
+  const auto alike = [&options](const LocalGrid& g) {
+    return g.resolution_m() == options.resolution_m && g.combine() == options.combine;
+  };
+  if (parts.size() < workers || !std::all_of(parts.begin(), parts.end(), alike)) {
+    parts.assign(workers, LocalGrid(options.resolution_m, options.combine));
+  }
   std::vector<RenderStats> part_stats(workers);
   const float clamp = static_cast<float>(options.max_abs_log_odds);
   detail::ForEachRowBlock(rows, workers, [&](std::size_t t, const std::vector<std::size_t>& mine) {
@@ -68,6 +71,7 @@ TracedMasses TraceMasses(const BeamGrid& grid, const Eigen::Isometry3d& T_world_
     RenderStats& s = part_stats[t];
     // A beam's mass crosses a voxel or two; fine grids' beams share voxels (a 640 x 480 stereo
     // frame: 15.6 k voxels from 307 k beams): a table for every beam would cost more to clear.
+    parts[t].Clear();
     parts[t].Reserve(mine.size() * cols / 8 + 1024);
     for (const std::size_t row : mine) {
       for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
@@ -81,56 +85,80 @@ TracedMasses TraceMasses(const BeamGrid& grid, const Eigen::Isometry3d& T_world_
       }
     }
   });
-  TracedMasses out{std::move(parts[0]), part_stats[0]};
+  RenderStats out = part_stats[0];
   for (std::size_t t = 1; t < workers; ++t) {
-    out.traced.Merge(parts[t]);
-    out.stats.beams_rendered += part_stats[t].beams_rendered;
-    out.stats.beams_untouched += part_stats[t].beams_untouched;
-    out.stats.rays_traced += part_stats[t].rays_traced;
-    out.stats.segments += part_stats[t].segments;
+    parts[0].Merge(parts[t]);
+    out.beams_rendered += part_stats[t].beams_rendered;
+    out.beams_untouched += part_stats[t].beams_untouched;
+    out.rays_traced += part_stats[t].rays_traced;
+    out.segments += part_stats[t].segments;
   }
-  out.stats.voxels = out.traced.size();
+  out.voxels = parts[0].size();
   return out;
 }
 
 }  // namespace
 
+RenderScratch::RenderScratch() : buffers_(std::make_unique<Buffers>()) {}
+RenderScratch::~RenderScratch() = default;
+RenderScratch::RenderScratch(RenderScratch&&) noexcept = default;
+RenderScratch& RenderScratch::operator=(RenderScratch&&) noexcept = default;
+
+void RenderScratch::Recycle(RenderedGrid&& spent) {
+  std::vector<MapNode> storage = spent.TakeStorage();
+  if (storage.capacity() > buffers_->nodes.capacity()) buffers_->nodes = std::move(storage);
+}
+
+std::size_t RenderScratch::MemoryBytes() const {
+  const Buffers& b = *buffers_;
+  std::size_t bytes = sizeof(Buffers) + b.profiles.capacity() * sizeof(BeamProfile) +
+                      b.pyramid.MemoryBytes() + b.directions.capacity() * sizeof(Eigen::Vector3f) +
+                      b.have_direction.capacity() + b.nodes.capacity() * sizeof(MapNode);
+  for (const LocalGrid& g : b.traced) bytes += g.MemoryBytes();
+  return bytes;
+}
+
 RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                               const RenderOptions& options, RenderStats* stats,
-                              const SaturatedFree* skip) {
+                              const SaturatedFree* skip, RenderScratch* scratch) {
   const BeamTessellation& tess = grid.tessellation();
   if (!tess.HasTangentEdges()) {
     return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
   }
+  RenderScratch own;  // used when the caller keeps none: everything freshly allocated
+  RenderScratch::Buffers& buffers = (scratch != nullptr ? scratch : &own)->buffers();
   const std::size_t workers =
       detail::RowWorkers(static_cast<std::size_t>(tess.rows()), options.threads);
   const double t_start = detail::BeamTracer::StartOf(grid);
   // Each beam's free zone and mass (first, for every beam: a beam's rays follow its
   // neighbours' surfaces), then its rays traced through the mass.
-  const std::vector<BeamProfile> profiles = detail::ProfileBeams(grid, options, t_start, workers);
-  std::vector<Aggregate> beams(grid.beam_count());
-  TracedMasses masses = TraceMasses(grid, T_world_sensor, options, profiles, workers, &beams);
-  RenderStats& s = masses.stats;
+  detail::ProfileBeams(grid, options, t_start, workers, &buffers.profiles);
+  std::vector<Aggregate>& beams = buffers.pyramid.Beams(tess.cols(), tess.rows());
+  RenderStats s = TraceMasses(grid, T_world_sensor, options, buffers.profiles, workers,
+                              &buffers.traced, &beams);
   float global_far = -std::numeric_limits<float>::infinity();
   for (const Aggregate& a : beams) global_far = std::max(global_far, a.max_far);
-  const detail::BeamPyramid pyramid(tess.cols(), tess.rows(), std::move(beams));
-  RenderedGrid out(options.resolution_m);
+  buffers.pyramid.Build();
+  RenderedGrid out(options.resolution_m, std::move(buffers.nodes));
+  buffers.nodes = {};
   if (s.beams_rendered > 0) {
-    detail::DescendOctree(grid, T_world_sensor, options, pyramid, masses.traced, t_start,
-                          global_far, skip, &out, &s);
+    detail::DescendOctree(grid, T_world_sensor, options, buffers.pyramid, buffers.traced[0],
+                          t_start, global_far, skip, &buffers.directions, &buffers.have_direction,
+                          &out, &s);
   }
   if (stats != nullptr) *stats = s;
   return out;
 }
 
 RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
-                    const RenderOptions& options, RenderStats* stats, const SaturatedFree* skip) {
+                    const RenderOptions& options, RenderStats* stats, const SaturatedFree* skip,
+                    RenderScratch* scratch) {
   // The mean and the pool of a voxel's segments need every crossing of every ray, free ones
   // included: only the max rule lets the free zones be decided block by block.
   if (options.method == RenderMethod::kRayTraced || options.combine != VoxelCombine::kMaxLogOdds) {
     return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
   }
-  return RenderProjective(grid, T_world_sensor, options, stats, skip);
+  return RenderProjective(grid, T_world_sensor, options, stats, skip, scratch);
 }
 
 }  // namespace fusion

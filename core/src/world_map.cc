@@ -177,6 +177,7 @@ MapStatus WorldMap::ReplaceLive(const std::string& sensor_id, RenderedGrid rende
   const std::size_t before = pending_.size();
   FuseRegions(Working(), policy_, Sources(nullptr), {&old, &s->live}, &pending_);
   MergeRun(before);
+  render_scratch_.Recycle(std::move(old));
   s->counters.live_nodes = s->live.size();
   if (stats != nullptr) stats->regions_changed = pending_.size() - before;
   return MapStatus::kOk;
@@ -203,6 +204,11 @@ MapStatus WorldMap::CommitLive(const std::string& sensor_id) {
   RenderedGrid old = std::move(s->live);
   s->live = RenderedGrid(options_.resolution_m);
   s->counters.live_nodes = 0;
+  struct GiveBack {  // every return below hands old's memory to the next render
+    RenderScratch& scratch;
+    RenderedGrid& grid;
+    ~GiveBack() { scratch.Recycle(std::move(grid)); }
+  } give_back{render_scratch_, old};
   // Where no other live contribution overlaps, the map already holds what the history now
   // holds (both are Fuse(history before, this contribution)) except where the history's
   // tighter occupied clamp cut it: there the contribution was positive, since the history
@@ -349,7 +355,7 @@ MapStatus WorldMap::Integrate(const std::string& sensor_id, const Eigen::Isometr
       RenderStats render_stats;
       const SaturatedFree skip = Saturation(sensor_id);
       (void)ReplaceLive(sensor_id, fusion::Render(*sealed->grid, sealed->T_world_sensor, render_,
-                                                  &render_stats, &skip));
+                                                  &render_stats, &skip, &render_scratch_));
       ++s->counters.renders;
     }
     (void)CommitLive(sensor_id);
@@ -381,7 +387,9 @@ MapStatus WorldMap::Render(const std::string& sensor_id, FuseStats* stats) {
     const Period& open = s->periods->open();
     const SaturatedFree skip = Saturation(sensor_id);
     (void)ReplaceLive(
-        sensor_id, fusion::Render(*open.grid, open.T_world_sensor, render_, &result.render, &skip),
+        sensor_id,
+        fusion::Render(*open.grid, open.T_world_sensor, render_, &result.render, &skip,
+                       &render_scratch_),
         &result);
     s->rendered_frames = open.frames;
     (void)Publish();
@@ -435,7 +443,7 @@ std::size_t WorldMap::MemoryBytes() const {
   if (working_) bytes += working_->memoryUsage();
   if (spare_) bytes += spare_->memoryUsage();
   for (const auto& [id, s] : sensors_) bytes += s->live.MemoryBytes();
-  return bytes;
+  return bytes + render_scratch_.MemoryBytes();
 }
 
 }  // namespace fusion

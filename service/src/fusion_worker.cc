@@ -372,7 +372,8 @@ void FusionWorker::CommitSealed(Sealed sealed) {
       const SaturatedFree skip = map_->Saturation(id);
       const Clock::time_point start = Clock::now();
       (void)map_->ReplaceLive(
-          id, Render(*period.grid, period.T_world_sensor, render_options_, nullptr, &skip));
+          id, Render(*period.grid, period.T_world_sensor, render_options_, nullptr, &skip,
+                     &map_->render_scratch()));
       if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(start));
       renders_.fetch_add(1);
     }
@@ -412,7 +413,8 @@ bool FusionWorker::RenderOpen(Lane& lane) {
     try {
       const SaturatedFree skip = map_->Saturation(lane.setup->id);
       const Clock::time_point render_start = Clock::now();
-      grid = Render(*open.grid, open.T_world_sensor, render_options_, nullptr, &skip);
+      grid = Render(*open.grid, open.T_world_sensor, render_options_, nullptr, &skip,
+                    &map_->render_scratch());
       if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(render_start));
     } catch (const std::exception& e) {
       spdlog::error("worker: render of '{}' failed: {}", lane.setup->id, e.what());

@@ -100,6 +100,21 @@ void BM_IntegrateSr3000Frame(benchmark::State& state) {
 }
 BENCHMARK(BM_IntegrateSr3000Frame)->Unit(benchmark::kMillisecond);
 
+// A moving sensor's frame: the grid reset (a recycled period's) and one frame integrated into
+// beams at their prior, which first split their lists around every reading's ROI.
+void BM_IntegrateSr3000FrameFreshPeriod(benchmark::State& state) {
+  const Fixture& f = SharedFixture();
+  fusion::BeamGrid grid(f.sr.spec, GridOptions());
+  std::size_t i = 0;
+  for (auto _ : state) {
+    const auto& cloud = f.frames[i++ % f.frames.size()];
+    grid.Reset();
+    benchmark::DoNotOptimize(grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range));
+  }
+  state.counters["cells_per_beam"] = static_cast<double>(grid.cells_per_beam());
+}
+BENCHMARK(BM_IntegrateSr3000FrameFreshPeriod)->Unit(benchmark::kMillisecond);
+
 // The same with change detection on (BeamGridOptions::change_run = 3, the default): the ROI
 // masses the updates return, judged beam by beam once per cloud (docs/mapping.md, "A world
 // that changes").
@@ -124,9 +139,12 @@ void RenderFrames(benchmark::State& state, const fusion::SensorSpec& spec,
   fusion::BeamGrid grid(spec, GridOptions());
   for (const auto& cloud : clouds) grid.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
   fusion::RenderStats stats;
+  fusion::RenderScratch scratch;  // as the map keeps one: each render reuses the last's buffers
   for (auto _ : state) {
     stats = {};
-    benchmark::DoNotOptimize(fusion::Render(grid, T, options, &stats).size());
+    fusion::RenderedGrid rendered = fusion::Render(grid, T, options, &stats, nullptr, &scratch);
+    benchmark::DoNotOptimize(rendered.size());
+    scratch.Recycle(std::move(rendered));
   }
   state.counters["coarse_nodes"] = static_cast<double>(stats.coarse_nodes);
   state.counters["fine_voxels"] = static_cast<double>(stats.fine_voxels);
@@ -222,19 +240,29 @@ void BM_MovingVersusOctoMap(benchmark::State& state) {
   const Drive& drive = SrDrive();
   const double max_range_m = state.range(0) == 0 ? f.sr.spec.r_max_m : 4.0;
   state.SetLabel(state.range(0) == 0 ? "full range" : "rays to 4 m");
-  double ours_ms = 0.0, octomap_ms = 0.0;
+  double ours_ms = 0.0, integrate_ms = 0.0, octomap_ms = 0.0;
   std::size_t ours_bytes = 0, octomap_bytes = 0;
+  fusion::RenderStats render;  // summed over the frames after the first
   for (auto _ : state) {
     fusion::WorldMap map(MapOptions(max_range_m));
     (void)map.AddSensor("sr", f.sr.spec);
     octomap::OcTree tree(kResolutionM);
-    ours_ms = octomap_ms = 0.0;
+    ours_ms = integrate_ms = octomap_ms = 0.0;
+    render = {};
     for (std::size_t k = 0; k < drive.poses.size(); ++k) {
       const auto& cloud = drive.clouds[k];
       auto t0 = Clock::now();
       (void)map.Integrate("sr", drive.poses[k], cloud.xyz.data(), cloud.size(), cloud.beyond_range);
-      (void)map.Render("sr");
-      if (k > 0) ours_ms += MillisecondsSince(t0);  // the first frame builds the beam grids
+      const double integrated_ms = MillisecondsSince(t0);
+      fusion::FuseStats fuse;
+      (void)map.Render("sr", &fuse);
+      if (k > 0) {  // the first frame builds the beam grids
+        ours_ms += MillisecondsSince(t0);
+        integrate_ms += integrated_ms;
+        render.coarse_nodes += fuse.render.coarse_nodes;
+        render.fine_voxels += fuse.render.fine_voxels;
+        render.segments += fuse.render.segments;
+      }
       t0 = Clock::now();
       fusion::sim::InsertIntoOctoMap(cloud, drive.poses[k], max_range_m, &tree);
       if (k > 0) octomap_ms += MillisecondsSince(t0);
@@ -246,6 +274,12 @@ void BM_MovingVersusOctoMap(benchmark::State& state) {
   state.counters["ours_ms_per_frame"] = ours_ms / frames;
   state.counters["octomap_ms_per_frame"] = octomap_ms / frames;
   state.counters["speedup"] = octomap_ms / ours_ms;
+  // Where our time goes: integration, and the render with the fuse into the map.
+  state.counters["ours_integrate_ms"] = integrate_ms / frames;
+  state.counters["ours_render_fuse_ms"] = (ours_ms - integrate_ms) / frames;
+  state.counters["coarse_nodes"] = static_cast<double>(render.coarse_nodes) / frames;
+  state.counters["fine_voxels"] = static_cast<double>(render.fine_voxels) / frames;
+  state.counters["segments"] = static_cast<double>(render.segments) / frames;
   state.counters["ours_map_MB"] = static_cast<double>(ours_bytes) / 1e6;
   state.counters["octomap_MB"] = static_cast<double>(octomap_bytes) / 1e6;
 }

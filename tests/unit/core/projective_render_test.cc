@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -256,6 +257,50 @@ TEST(ProjectivePyramid, FreeBlocksLieInFrontOfEveryBeamsMass) {
       EXPECT_GT(points, 500u);
     }
   }
+}
+
+// Renders through one scratch (as the map makes them) give what fresh renders give, node for
+// node, whatever the renders before it were: other sensors, poses, resolutions and threads.
+TEST(RenderScratchTest, ReusedBuffersChangeNothing) {
+  struct Step {
+    std::string preset;
+    int pose;
+    double resolution_m;
+    unsigned threads;
+  };
+  // Each after one of the same size at another pose or of another grid ("pinhole" has the
+  // stereo camera's 160 x 120 beams).
+  const std::vector<Step> steps = {{"sr3000", 0, 0.05, 1}, {"sr3000", 2, 0.02, 2},
+                                   {"stoc", 1, 0.05, 1},   {"pinhole", 0, 0.05, 1},
+                                   {"sr3000", 1, 0.05, 1}};
+  RenderScratch scratch;
+  std::size_t recycled_bytes = 0;
+  for (const Step& step : steps) {
+    const sim::SensorRun run = PaperRun(step.preset);
+    const Eigen::Isometry3d T = PoseAt(run, step.pose);
+    const BeamGrid grid = GridAt(run, T, 2, 5);
+    RenderOptions options;
+    options.resolution_m = step.resolution_m;
+    options.threads = step.threads;
+    RenderStats fresh_stats, reused_stats;
+    const RenderedGrid fresh = RenderProjective(grid, T, options, &fresh_stats);
+    RenderedGrid reused = RenderProjective(grid, T, options, &reused_stats, nullptr, &scratch);
+    ASSERT_EQ(fresh.size(), reused.size()) << step.preset;
+    ASSERT_GT(fresh.size(), 1000u);
+    for (std::size_t i = 0; i < fresh.size(); ++i) {
+      const MapNode& a = fresh.nodes()[i];
+      const MapNode& b = reused.nodes()[i];
+      ASSERT_TRUE(a.code == b.code && a.depth == b.depth && a.log_odds == b.log_odds)
+          << step.preset << " node " << i;
+    }
+    EXPECT_EQ(fresh_stats.voxels, reused_stats.voxels);
+    EXPECT_EQ(fresh_stats.segments, reused_stats.segments);
+    recycled_bytes = std::max(recycled_bytes, reused.MemoryBytes());
+    scratch.Recycle(std::move(reused));
+    EXPECT_TRUE(reused.empty());
+  }
+  // The scratch keeps the largest result's storage, and the beams' buffers.
+  EXPECT_GE(scratch.MemoryBytes(), recycled_bytes);
 }
 
 }  // namespace

@@ -7,6 +7,8 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cstddef>
+#include <memory>
 #include <vector>
 
 #include "fusion/core/beam_grid.h"
@@ -27,6 +29,28 @@ struct SaturatedFree {
   std::vector<const RenderedGrid*> others;  // at most 8
 };
 
+// What a render can reuse from the renders before it: the beams' profiles and pyramid, the
+// voxels traced, the result's node storage (Recycle). Renders of one sensor are much alike in
+// size, and memory freshly mapped for each of them cost more than the render's own work
+// (BENCHMARKS.md, "Render buffers reused"). Not thread-safe: one per thread that renders.
+class RenderScratch {
+ public:
+  RenderScratch();
+  ~RenderScratch();
+  RenderScratch(RenderScratch&&) noexcept;
+  RenderScratch& operator=(RenderScratch&&) noexcept;
+
+  // Keeps a spent render's node storage for the next render's result.
+  void Recycle(RenderedGrid&& spent);
+  [[nodiscard]] std::size_t MemoryBytes() const;
+
+  struct Buffers;  // core's own (render_scratch.h)
+  [[nodiscard]] Buffers& buffers() { return *buffers_; }
+
+ private:
+  std::unique_ptr<Buffers> buffers_;
+};
+
 // Same inputs and frames as RenderBeamGrid (the oracle); the result holds coarse free blocks
 // and voxels, in Morton order. Sensors whose field of view reaches 180 degrees on either axis
 // are rendered ray by ray (the pyramid needs the tangent tables). `skip` (may be null): see
@@ -35,13 +59,16 @@ struct SaturatedFree {
                                             const Eigen::Isometry3d& T_world_sensor,
                                             const RenderOptions& options,
                                             RenderStats* stats = nullptr,
-                                            const SaturatedFree* skip = nullptr);
+                                            const SaturatedFree* skip = nullptr,
+                                            RenderScratch* scratch = nullptr);
 
 // options.method's render: RenderProjective, or RenderBeamGrid as a RenderedGrid of voxels. The
 // voxel rules other than the max (the mean and the pool of a voxel's segments) need every
 // crossing of every ray, free ones included, and are always rendered ray by ray.
+// `scratch` (may be null): buffers reused from the renders before.
 [[nodiscard]] RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                                   const RenderOptions& options, RenderStats* stats = nullptr,
-                                  const SaturatedFree* skip = nullptr);
+                                  const SaturatedFree* skip = nullptr,
+                                  RenderScratch* scratch = nullptr);
 
 }  // namespace fusion

@@ -41,6 +41,11 @@ struct MapNode {
 class RenderedGrid {
  public:
   explicit RenderedGrid(double resolution_m = 0.02) : resolution_m_(resolution_m) {}
+  // Empty, appending into `storage`'s memory (a spent grid's: see TakeStorage).
+  RenderedGrid(double resolution_m, std::vector<MapNode> storage)
+      : resolution_m_(resolution_m), nodes_(std::move(storage)) {
+    nodes_.clear();
+  }
   // Every voxel of a local grid (sorted into Morton order).
   [[nodiscard]] static RenderedGrid FromLocalGrid(const LocalGrid& local);
 
@@ -56,6 +61,12 @@ class RenderedGrid {
   // IsValid).
   void Append(const MapNode& node) { nodes_.push_back(node); }
   void Clear() { nodes_.clear(); }
+  // The nodes' memory, for a grid made later; this grid is left empty.
+  [[nodiscard]] std::vector<MapNode> TakeStorage() {
+    std::vector<MapNode> storage = std::move(nodes_);
+    nodes_ = {};
+    return storage;
+  }
   // Sorted, disjoint, depths in [0, 16], codes aligned to their depth.
   [[nodiscard]] bool IsValid() const;
   [[nodiscard]] std::size_t MemoryBytes() const { return nodes_.capacity() * sizeof(MapNode); }

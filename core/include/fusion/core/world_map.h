@@ -167,6 +167,10 @@ class WorldMap {
   // Folds the sensor's live contribution into the committed history; the map does not change
   // (it already holds it) unless other sensors' live contributions overlap it.
   MapStatus CommitLive(const std::string& sensor_id);
+  // Buffers for renders made for this map (fusion::Render's scratch): the live contributions
+  // ReplaceLive and CommitLive let go of give their memory back here. Use it from the thread
+  // that calls the map's other non-const members, under the same lock.
+  [[nodiscard]] RenderScratch& render_scratch() { return render_scratch_; }
   // The map so far becomes the committed history of a map that starts from it (a snapshot
   // loaded at start); every live contribution is dropped. Voxels are fused (clamped) as they
   // come in. Versions go on; the next publication is a reset.
@@ -223,7 +227,7 @@ class WorldMap {
   // Fused occupancy of a world point; std::nullopt where the map has no information.
   [[nodiscard]] std::optional<double> Occupancy(const Eigen::Vector3d& p_world) const;
   // Nodes of the committed history, the working and the published trees, and of the live
-  // contributions, in bytes (OcTree::memoryUsage and RenderedGrid::MemoryBytes).
+  // contributions, and the render buffers kept (render_scratch), in bytes.
   [[nodiscard]] std::size_t MemoryBytes() const;
   // Publications that had to copy a tree a reader still held (see the top of this file).
   [[nodiscard]] std::uint64_t tree_copies() const { return tree_copies_; }
@@ -253,6 +257,7 @@ class WorldMap {
   std::uint64_t version_ = 0;
   Publication last_;
   std::uint64_t tree_copies_ = 0;
+  RenderScratch render_scratch_;
 };
 
 }  // namespace fusion
