@@ -126,7 +126,17 @@ void PrintPlanesOfTheFusedMap(
 }  // namespace
 
 int main(int argc, char** argv) {
-  const double resolution_m = argc > 1 ? std::atof(argv[1]) : 0.02;
+  const std::string arg = argc > 1 ? argv[1] : "0.02";
+  char* end = nullptr;
+  const double resolution_m = std::strtod(arg.c_str(), &end);
+  if (argc > 2 || arg == "--help" || arg == "-h" || end == arg.c_str() || *end != '\0' ||
+      !(resolution_m >= 0.005 && resolution_m <= 1.0)) {
+    std::fprintf(arg == "--help" || arg == "-h" ? stdout : stderr,
+                 "usage: accuracy_report [RESOLUTION_M]\n"
+                 "  The simulator's accuracy table (our map against OctoMap on the paper's board\n"
+                 "  scene; BENCHMARKS.md), voxels of RESOLUTION_M metres, 0.005..1 (default 0.02).\n");
+    return arg == "--help" || arg == "-h" ? 0 : 2;
+  }
   const fusion::sim::Scene scene = fusion::sim::PaperBoardScene();
   const auto all_runs = fusion::sim::PaperSensorRuns();
   std::vector<std::vector<fusion::sim::OrganizedCloud>> all_frames;
