@@ -31,7 +31,7 @@ struct SaturatedFree {
 
 // What a render can reuse from the renders before it: the beams' profiles and pyramid, the
 // voxels traced, the result's node storage (Recycle). Renders of one sensor are much alike in
-// size, and memory freshly mapped for each of them cost more than the render's own work
+// size, and memory freshly mapped for each of them can cost as much as the render's own work
 // (BENCHMARKS.md, "Render buffers reused"). Not thread-safe: one per thread that renders.
 class RenderScratch {
  public:
