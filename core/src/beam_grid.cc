@@ -286,22 +286,30 @@ void BeamGrid::IntervalOccupancy(std::size_t beam, const std::vector<double>& bo
     cells[j + 1] = ci;
     previous = ci;
   }
-  impl_->store->TailMasses(beam, cells, &tails);
+  tails.resize(cells.size());
+  TailMasses(beam, cells.data(), cells.size(), tails.data());
   const double* tail = tails.data() + 1;
   out->resize(boundaries_m.size() - 1);
   for (std::size_t j = 0; j + 1 < boundaries_m.size(); ++j) {
-    (*out)[j] = IntervalOccupancyOfCells(tail[j], tail[j + 1], tails[0], cells[j + 2] - cells[j + 1]);
+    (*out)[j] =
+        IntervalOccupancyOfCells(tail[j], tail[j + 1], tails[0], cells[j + 2] - cells[j + 1]);
   }
 }
 
+void BeamGrid::TailMasses(std::size_t beam, const std::uint32_t* cells, std::size_t count,
+                          double* out) const {
+  impl_->CheckBeam(beam);
+  const auto n = static_cast<std::uint32_t>(cells_per_beam());
+  for (std::size_t j = 0; j < count; ++j) {
+    if (cells[j] > n || (j > 0 && cells[j] < cells[j - 1])) {
+      throw std::invalid_argument("TailMasses needs ascending cells of at most N");
+    }
+  }
+  impl_->store->TailMasses(beam, cells, count, out);
+}
+
 std::uint32_t BeamGrid::CellOf(double range_m) const {
-  // Rounded to the nearest cell edge; the cast after the clamps rounds as std::round does for
-  // these non-negative values, without its library call (a render asks for every crossing).
-  const double c = range_m / impl_->options.cell_size_m;
-  if (!(c >= 0.0)) return 0;  // NaN and negatives
-  const auto n = static_cast<double>(cells_per_beam());
-  if (c >= n) return static_cast<std::uint32_t>(n);
-  return static_cast<std::uint32_t>(c + 0.5);
+  return CellOfRange(range_m, impl_->options.cell_size_m, cells_per_beam());
 }
 
 double BeamGrid::IntervalOccupancyOfCells(double tail_a, double tail_b, double total,

@@ -38,9 +38,9 @@ class BeamStoreOf final : public BeamStore {
   void Weights(std::size_t beam, std::vector<double>* weights) const override {
     At(beam).Weights(*ctx_, weights);
   }
-  void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
-                  std::vector<double>* out) const override {
-    At(beam).TailMasses(*ctx_, cells, out);
+  void TailMasses(std::size_t beam, const std::uint32_t* cells, std::size_t count,
+                  double* out) const override {
+    At(beam).TailMasses(*ctx_, cells, count, out);
   }
   void TailSpan(std::size_t beam, std::uint32_t first, std::uint32_t last, std::vector<double>* out,
                 double* total) const override {

@@ -52,6 +52,16 @@ BeamTessellation::BeamTessellation(const SensorSpec& spec)
       rows.push_back(std::tan(elevation_max_rad_ - k * beam_width_v_rad()));
     }
   }
+  if (!pinhole_) {
+    for (int c = 0; c < cols_; ++c) {
+      const double azimuth = azimuth_min_rad_ + (c + 0.5 + 0.0) * beam_width_h_rad();
+      col_sin_cos_.push_back({std::sin(azimuth), std::cos(azimuth)});
+    }
+    for (int r = 0; r < rows_; ++r) {
+      const double elevation = elevation_max_rad_ - (r + 0.5 - 0.0) * beam_width_v_rad();
+      row_sin_cos_.push_back({std::sin(elevation), std::cos(elevation)});
+    }
+  }
   if (!cols.empty()) {
     tan_col_edges_ = Edges(std::move(cols));
     tan_row_edges_ = Edges(std::move(rows));
@@ -216,7 +226,10 @@ BeamTessellation::TangentBounds BeamTessellation::InsetTangents(double beams) co
 }
 
 Eigen::Vector3d BeamTessellation::Direction(std::size_t beam) const {
-  return SubDirection(beam, 0.0, 0.0);
+  if (pinhole_ || beam >= beam_count()) return SubDirection(beam, 0.0, 0.0);
+  const auto& az = col_sin_cos_[beam % static_cast<std::size_t>(cols_)];
+  const auto& el = row_sin_cos_[beam / static_cast<std::size_t>(cols_)];
+  return {el[1] * az[0], -el[0], el[1] * az[1]};
 }
 
 Eigen::Vector3d BeamTessellation::SubDirection(std::size_t beam, double right, double up) const {

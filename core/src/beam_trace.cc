@@ -76,6 +76,7 @@ BeamTracer::BeamTracer(const BeamGrid& grid, const Eigen::Isometry3d& T_world_se
       width_rad_(
           std::max(grid.tessellation().beam_width_h_rad(), grid.tessellation().beam_width_v_rad())),
       cell_m_(grid.options().cell_size_m),
+      cells_per_beam_(grid.cells_per_beam()),
       inv_res_(1.0 / options.resolution_m),
       continuity_(1.0 / std::tan(std::clamp(options.min_incidence_deg, 0.1, 89.0) * kPi / 180.0)) {
   boundaries_.reserve(kChunkSegments + 1);
@@ -88,15 +89,20 @@ double SegmentEvidence(double hazard, double prior_log_odds, double reach) {
   return reach * std::max(0.0, l - std::max(prior_log_odds, 0.0));
 }
 
-const BeamTracer::Prior& BeamTracer::PriorOfCells(long n) {
+inline const BeamTracer::Prior& BeamTracer::PriorOfCells(long n) {
   const auto index = static_cast<std::size_t>(std::max(n, 0L));
+  if (index < prior_cache_.size() && !std::isnan(prior_cache_[index].probability)) {
+    return prior_cache_[index];
+  }
+  return FillPrior(index);
+}
+
+const BeamTracer::Prior& BeamTracer::FillPrior(std::size_t index) {
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   if (index >= prior_cache_.size()) prior_cache_.resize(index + 1, Prior{kNaN, kNaN});
   Prior& v = prior_cache_[index];
-  if (std::isnan(v.probability)) {
-    v.probability = grid_.PriorOccupancy(static_cast<double>(index) * cell_m_);
-    v.log_odds = Logit(v.probability);
-  }
+  v.probability = grid_.PriorOccupancy(static_cast<double>(index) * cell_m_);
+  v.log_odds = Logit(v.probability);
   return v;
 }
 
@@ -120,19 +126,25 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
   // Where the ray enters the voxel holding p(t_first), not before t_ref.
   const double t_entry = std::max(t_ref, walk.EntryRange());
   double t_in = std::min(t_entry, t_first);
-  // The mass the ray has left behind it since t_ref, as a trace from t_ref would have counted it.
+  // The mass the ray has left behind it since t_ref, as a trace from t_ref would have counted it:
+  // the first chunk's look-up reads it too ([t_ref, t_in) ahead of its crossings), unless the
+  // beam's table serves the chunk and not that stretch.
   double remaining_mass = 1.0;
-  if (t_in > t_ref) {
+  bool lead = t_in > t_ref;
+  if (lead && table_.valid && table_.beam == beam) {
     boundaries_.assign({t_ref - shift, t_in - shift});
     Occupancies(beam, boundaries_, &occupancy_);
     remaining_mass = 1.0 - occupancy_[0];
     if (remaining_mass < options_.tail_mass) return t_in;
+    lead = false;
   }
+  const double t_in_first = t_in;
   bool done = false;
   bool left_map = false;  // the ray left the key range: it ends at the map's edge
   while (!done) {
     boundaries_.clear();
     keys_.clear();
+    if (lead) boundaries_.push_back(t_ref);
     boundaries_.push_back(t_in);
     while (keys_.size() < kChunkSegments && t_in < t_last_entry && !left_map) {
       const int axis = walk.NextAxis();
@@ -147,25 +159,34 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
       for (double& b : boundaries_) b -= shift;
     }
     Occupancies(beam, boundaries_, &occupancy_);
-    long c1 = NearestCell(boundaries_[0] / cell_m_);
+    const double* bounds = boundaries_.data();
+    const double* occupancy = occupancy_.data();
+    if (lead) {
+      lead = false;
+      remaining_mass = 1.0 - occupancy_[0];
+      if (remaining_mass < options_.tail_mass) return t_in_first;
+      ++bounds;
+      ++occupancy;
+    }
+    long c1 = NearestCell(bounds[0] / cell_m_);
     for (std::size_t j = 0; j < keys_.size(); ++j) {
       const long c0 = c1;
-      c1 = NearestCell(boundaries_[j + 1] / cell_m_);
+      c1 = NearestCell(bounds[j + 1] / cell_m_);
       if (c1 <= c0) continue;  // shorter than a beam cell: no evidence of its own
-      const double p = j < occupancy_.size() ? occupancy_[j] : 0.5;
+      const double p = occupancy[j];
       const Prior& prior = PriorOfCells(c1 - c0);
       // SegmentEvidence's dead band (prior < hazard <= 1/2: none), told without its logarithm.
       double evidence = p > prior.probability && p <= 0.5
                             ? 0.0
                             : SegmentEvidence(p, prior.log_odds, remaining_mass);
       evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);
-      const double length_m = boundaries_[j + 1] - boundaries_[j];
+      const double length_m = bounds[j + 1] - bounds[j];
       out->push_back({keys_[j], static_cast<float>(evidence),
-                      static_cast<float>(length_m) * weight_scale, boundaries_[j + 1] + shift});
+                      static_cast<float>(length_m) * weight_scale, bounds[j + 1] + shift});
       remaining_mass *= (1.0 - p);
       if (remaining_mass < options_.tail_mass) {
         done = true;
-        t_in = boundaries_[j + 1] + shift;
+        t_in = bounds[j + 1] + shift;
         break;
       }
     }
@@ -176,24 +197,34 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
 
 void BeamTracer::Occupancies(std::size_t beam, const std::vector<double>& boundaries_m,
                              std::vector<double>* out) {
-  cells_.resize(boundaries_m.size());
+  // cells_[0] = 0 (S there is the beam's whole mass), then each boundary's cell as
+  // IntervalOccupancy rounds it: its tails in one walk of the beam, or from the beam's table.
+  const std::size_t n = boundaries_m.size();
+  cells_.resize(n + 1);
+  tails_.resize(n + 1);
+  cells_[0] = 0;
   std::uint32_t previous = 0;
-  for (std::size_t j = 0; j < boundaries_m.size(); ++j) {
-    cells_[j] = previous = std::max(previous, grid_.CellOf(boundaries_m[j]));  // as the grid
+  for (std::size_t j = 0; j < n; ++j) {
+    cells_[j + 1] = previous =
+        std::max(previous, CellOfRange(boundaries_m[j], cell_m_, cells_per_beam_));
   }
-  if (!table_.Covers(beam, cells_.front(), cells_.back())) {
-    grid_.IntervalOccupancy(beam, boundaries_m, out);
-    return;
+  const std::uint32_t* cells = cells_.data() + 1;
+  if (table_.Covers(beam, cells[0], cells[n - 1])) {
+    tails_[0] = table_.total;
+    for (std::size_t j = 0; j < n; ++j) tails_[j + 1] = table_.S(cells[j]);
+  } else {
+    grid_.TailMasses(beam, cells_.data(), n + 1, tails_.data());
   }
-  out->resize(boundaries_m.size() - 1);
-  for (std::size_t j = 0; j + 1 < boundaries_m.size(); ++j) {
-    (*out)[j] = grid_.IntervalOccupancyOfCells(table_.S(cells_[j]), table_.S(cells_[j + 1]),
-                                               table_.total, cells_[j + 1] - cells_[j]);
+  out->resize(n - 1);
+  const double* tail = tails_.data() + 1;
+  for (std::size_t j = 0; j + 1 < n; ++j) {
+    (*out)[j] =
+        grid_.IntervalOccupancyOfCells(tail[j], tail[j + 1], tails_[0], cells[j + 1] - cells[j]);
   }
 }
 
 double BeamTracer::InformationEnd(std::size_t beam, double from_m) {
-  const std::uint32_t from = grid_.CellOf(from_m);
+  const std::uint32_t from = CellOfRange(from_m, cell_m_, cells_per_beam_);
   if (table_.Covers(beam, from, from)) {
     // BeamGrid::InformationEndM: the smallest cell after `from` whose S is below the fraction.
     // S does not rise with c: bisect.
@@ -276,8 +307,9 @@ void BeamTracer::TabulateMass(std::size_t beam, const BeamProfile& profile, doub
   // (moved by the nearest sub-ray's shift) to a voxel after where it ends (the farthest shift).
   const double margin = 2.0 * options_.resolution_m + cell_m_;
   const double end = std::isfinite(profile.info_end_m) ? profile.info_end_m : t_end_;
-  const std::uint32_t lo = grid_.CellOf(profile.mass_begin_m - reach_m - margin);
-  const std::uint32_t hi = grid_.CellOf(end + reach_m + margin);
+  const std::uint32_t lo =
+      CellOfRange(profile.mass_begin_m - reach_m - margin, cell_m_, cells_per_beam_);
+  const std::uint32_t hi = CellOfRange(end + reach_m + margin, cell_m_, cells_per_beam_);
   if (hi > lo && hi - lo <= kMaxTableCells) {
     grid_.TailMassSpan(beam, lo, hi, &table_.tails, &table_.total);
     table_.beam = beam;

@@ -104,7 +104,8 @@ class BeamTracer {
     double probability;
     double log_odds;
   };
-  const Prior& PriorOfCells(long n);
+  const Prior& PriorOfCells(long n);  // cached per tracer
+  const Prior& FillPrior(std::size_t index);
   // IntervalOccupancy and InformationEndM of the beam being traced, read from table_ where it
   // covers the cells asked for (the same walk's numbers, so the same results).
   void Occupancies(std::size_t beam, const std::vector<double>& boundaries_m,
@@ -136,6 +137,7 @@ class BeamTracer {
   double t_end_;
   double width_rad_;
   double cell_m_;
+  std::size_t cells_per_beam_;  // N, as BeamGrid::CellOf clamps to
   double inv_res_;     // as VoxelTraversal floors a point's index
   double continuity_;  // tan of the shallowest incidence still followed across beams, inverted
   std::vector<Prior> prior_cache_;
@@ -143,6 +145,7 @@ class BeamTracer {
   std::vector<octomap::OcTreeKey> keys_;
   std::vector<double> occupancy_;
   std::vector<std::uint32_t> cells_;
+  std::vector<double> tails_;  // S at cells_ (Occupancies)
   Table table_;
 };
 

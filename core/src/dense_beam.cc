@@ -53,16 +53,15 @@ void DenseBeam::Weights(const BeamContext& /*ctx*/, std::vector<double>* weights
   *weights = p_;
 }
 
-void DenseBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
-                           std::vector<double>* out) const {
-  out->assign(cells.size(), 0.0);
+void DenseBeam::TailMasses(const BeamContext& ctx, const std::uint32_t* cells, std::size_t count,
+                           double* out) const {
   const std::size_t n = ctx.cell_count();
   double acc = p_[n];
   std::size_t i = n;
-  for (std::size_t j = cells.size(); j-- > 0;) {
+  for (std::size_t j = count; j-- > 0;) {
     const std::size_t target = std::min<std::size_t>(cells[j], n);
     while (i > target) acc += p_[--i];
-    (*out)[j] = acc;
+    out[j] = acc;
   }
 }
 

@@ -11,6 +11,21 @@ namespace fusion {
 namespace {
 // Two doubles (SSE2 on x86-64, NEON on arm64) for the ROI update's inner loop.
 using V2 = double __attribute__((vector_size(16)));
+
+// v[0] + ... + v[n - 1] in four independent sums (an EC's stretch: the add chain, not the
+// loads, would set the pace).
+double PoolSum(const double* v, std::size_t n) {
+  double a = 0.0, b = 0.0, c = 0.0, d = 0.0;
+  std::size_t t = 0;
+  for (; t + 4 <= n; t += 4) {
+    a += v[t];
+    b += v[t + 1];
+    c += v[t + 2];
+    d += v[t + 3];
+  }
+  for (; t < n; ++t) a += v[t];
+  return (a + b) + (c + d);
+}
 }  // namespace
 
 UllBeam::UllBeam(const BeamContext& ctx) { Reset(ctx); }
@@ -33,6 +48,7 @@ void UllBeam::Reset(const BeamContext& ctx) {
   total_ = w_all_free_;
   ec_first_ = ec_end_ = ec_pool_ = 0;
   for (const Composite& c : list_) total_ += CompositeSum(ctx, c);
+  total_error_ = kSumError * total_;
   touched_ = false;
 }
 
@@ -107,7 +123,9 @@ double UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
     const std::size_t visible = ctx.disc().first_visible_cell;
     for (Composite& c : list_) {
       if (c.first >= visible) break;
-      total_ -= CompositeSum(ctx, c);
+      const double sum = CompositeSum(ctx, c);
+      total_error_ += kSumError * sum;
+      total_ -= sum;
       c.w_first = 0.0;
       for (std::uint32_t t = 0; c.exploded != 0 && t < c.count; ++t) pool_[c.pool_begin + t] = 0;
     }
@@ -176,9 +194,25 @@ double UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
   const double old_free = w_all_free_;
   w_all_free_ *= g;
   delta += w_all_free_ - old_free;
+  // The sums of the update err by at most kUpdateError of the weights they add (every term
+  // |v (f - 1)| is at most a weight before plus one after): the bound grows with the weights
+  // before and after, which matters where an update takes away nearly all of the total.
+  total_error_ += kUpdateError * (total_ + std::abs(total_ + delta));
   total_ += delta;
-  if (!(total_ >= kLowTotal && total_ <= kHighTotal)) Renormalise(ctx);
+  if (!(total_ >= kLowTotal && total_ <= kHighTotal)) {
+    Renormalise(ctx);
+  } else if (!(total_error_ <= kMaxTotalError * total_)) {
+    Resum(ctx);
+  }
   return mass;
+}
+
+void UllBeam::Resum(const BeamContext& ctx) {
+  double exact = w_all_free_;
+  for (const Composite& c : list_) exact += CompositeSum(ctx, c);
+  total_ = exact;
+  total_error_ = kSumError * exact;
+  if (!(total_ >= kLowTotal && total_ <= kHighTotal)) Renormalise(ctx);
 }
 
 void UllBeam::Renormalise(const BeamContext& ctx) {
@@ -194,6 +228,7 @@ void UllBeam::Renormalise(const BeamContext& ctx) {
   for (double& v : pool_) v *= scale;
   w_all_free_ *= scale;
   total_ = 1.0;
+  total_error_ = kSumError;
 }
 
 void UllBeam::Weights(const BeamContext& ctx, std::vector<double>* weights) const {
@@ -213,11 +248,9 @@ std::uint32_t UllBeam::TailDropCell(const BeamContext& ctx, std::uint32_t from,
   const std::size_t n = ctx.cell_count();
   const auto none = static_cast<std::uint32_t>(n + 1);
   const std::uint32_t start = std::min<std::uint32_t>(from, static_cast<std::uint32_t>(n));
-  thread_local std::vector<std::uint32_t> cells(1);
-  thread_local std::vector<double> tails;
-  cells.assign(1, start);
-  TailMasses(ctx, cells, &tails);
-  const double threshold = fraction * tails[0];
+  double s_start = 0.0;
+  TailMasses(ctx, &start, 1, &s_start);
+  const double threshold = fraction * s_start;
   double acc = w_all_free_;  // S(N)
   if (acc >= threshold) return none;
   for (std::size_t k = list_.size(); k-- > 0;) {
@@ -264,7 +297,7 @@ inline void UllBeam::TailsAtComposites(const BeamContext& ctx, double* s_at) con
     }
   }
   const double derived_ec = total_ - closed;
-  const bool derive = ecs == 1 && derived_ec > 1e-6 * total_;
+  const bool derive = ecs == 1 && total_error_ <= kDerivedError * derived_ec;
   double acc = w_all_free_;
   s_at[list_.size()] = acc;
   for (std::size_t k = list_.size(); k-- > 0;) {
@@ -377,35 +410,68 @@ BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from, do
   return out;
 }
 
-void UllBeam::TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
-                         std::vector<double>* out) const {
-  out->assign(cells.size(), 0.0);
+void UllBeam::TailMasses(const BeamContext& ctx, const std::uint32_t* cells, std::size_t count,
+                         double* out) const {
   const std::size_t n = ctx.cell_count();
-  double acc = w_all_free_;
-  std::size_t j = cells.size();
-  while (j > 0 && cells[j - 1] >= n) (*out)[--j] = acc;
-  for (std::size_t k = list_.size(); k-- > 0;) {
+  constexpr std::size_t kLocal = 32;
+  double s_local[kLocal + 1];
+  thread_local std::vector<double> s_heap;
+  double* s_at = s_local;
+  if (list_.size() + 1 > kLocal + 1) {
+    s_heap.resize(list_.size() + 1);
+    s_at = s_heap.data();
+  }
+  // S at every composite's start (the usual beam's one EC derived, as Profile does), then each
+  // cell (ascending) from its composite: a UEC in closed form; an EC by a running sum from its
+  // start while that keeps most of S, exactly from its end past that (no cancellation).
+  TailsAtComposites(ctx, s_at);
+  std::size_t k = 0;
+  std::size_t prefix_k = list_.size(), prefix_cells = 0;
+  double prefix = 0.0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const std::size_t x = cells[i];
+    if (x >= n) {
+      out[i] = w_all_free_;
+      continue;
+    }
+    while (std::size_t{list_[k].first} + list_[k].count <= x) ++k;
     const Composite& c = list_[k];
     const std::size_t c_end = std::size_t{c.first} + c.count;
     if (c.exploded == 0) {
-      while (j > 0 && cells[j - 1] >= c.first) {
-        const std::size_t from = std::min<std::size_t>(cells[j - 1], c_end);
-        (*out)[--j] = acc + c.w_first * ctx.RhoPow(from - c.first) * ctx.GeomSum(c_end - from);
-      }
-      acc += c.w_first * ctx.GeomSum(c.count);
-    } else {
-      double part = 0.0;
-      std::size_t t = c.count;
-      while (j > 0 && cells[j - 1] >= c.first) {
-        const std::size_t target = std::min<std::size_t>(cells[j - 1], c_end) - c.first;
-        while (t > target) part += pool_[c.pool_begin + --t];
-        (*out)[--j] = acc + part;
-      }
-      while (t > 0) part += pool_[c.pool_begin + --t];
-      acc += part;
+      out[i] = s_at[k + 1] + c.w_first * ctx.RhoPow(x - c.first) * ctx.GeomSum(c_end - x);
+      continue;
     }
+    const double* pool = pool_.data() + c.pool_begin;
+    if (k != prefix_k) {
+      prefix_k = k;
+      prefix_cells = 0;
+      prefix = 0.0;
+    }
+    prefix += PoolSum(pool + prefix_cells, x - c.first - prefix_cells);
+    prefix_cells = x - c.first;
+    // The difference errs by the total's bound and the sum's rounding: kept while that is
+    // within kTailError of it (cells up to a trace's information end, where S has fallen to a
+    // per cent of where it started, are well inside).
+    const double s = s_at[k] - prefix;
+    const double error =
+        total_error_ + kRoundingError * static_cast<double>(prefix_cells + 2) * s_at[k];
+    if (error <= kTailError * s) {
+      out[i] = s;
+      continue;
+    }
+    // This cell and the EC's later ones, from its end down.
+    std::size_t last = i;
+    while (last + 1 < count && cells[last + 1] < c_end) ++last;
+    double part = 0.0;
+    std::size_t t = c.count;
+    for (std::size_t j = last + 1; j-- > i;) {
+      const std::size_t to = cells[j] - c.first;
+      part += PoolSum(pool + to, t - to);
+      t = to;
+      out[j] = s_at[k + 1] + part;
+    }
+    i = last;
   }
-  while (j > 0) (*out)[--j] = acc;
 }
 
 void UllBeam::TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <stdexcept>
+#include <string>
 
 #include "fusion/core/beam_grid.h"
 
@@ -28,6 +30,21 @@ TEST(TessellationTest, DirectionMapsBackToItsBeam) {
       EXPECT_EQ(t.BeamOf(d), b) << name << " beam " << b;
       EXPECT_EQ(t.BeamOf(3.7 * d), b);  // range does not matter
     }
+  }
+}
+
+// Direction reads its centre lines from tables: bit for bit SubDirection's at offset 0, so a
+// render's rays do not move.
+TEST(TessellationTest, DirectionIsTheCentreSubDirectionExactly) {
+  for (const std::string name : {"sr3000", "stoc", "laser_3d"}) {
+    const BeamTessellation t(*SensorPreset(name));
+    for (std::size_t b = 0; b < t.beam_count(); b += 13) {
+      const Eigen::Vector3d d = t.Direction(b), s = t.SubDirection(b, 0.0, 0.0);
+      ASSERT_EQ(d.x(), s.x()) << name << " beam " << b;
+      ASSERT_EQ(d.y(), s.y()) << name << " beam " << b;
+      ASSERT_EQ(d.z(), s.z()) << name << " beam " << b;
+    }
+    EXPECT_THROW(static_cast<void>(t.Direction(t.beam_count())), std::out_of_range);
   }
 }
 

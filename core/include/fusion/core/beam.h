@@ -107,9 +107,9 @@ class DenseBeam {
   // beyond-range reading), a fraction of the beam's visible mass; -1 if no cell explains it.
   double Update(const BeamContext& ctx, std::size_t outcome);
   void Weights(const BeamContext& ctx, std::vector<double>* weights) const;  // N + 1
-  // S(c) = mass of cells >= c plus B_{N+1}, for ascending c in [0, N].
-  void TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
-                  std::vector<double>* out) const;
+  // S(c) = mass of cells >= c plus B_{N+1}, for `count` ascending c in [0, N], into out[].
+  void TailMasses(const BeamContext& ctx, const std::uint32_t* cells, std::size_t count,
+                  double* out) const;
   // S(c) for every c in [first, last] (last <= N) into out[c - first], and S(0) into *total.
   void TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,
                 std::vector<double>* out, double* total) const;
@@ -151,8 +151,8 @@ class UllBeam {
   // As DenseBeam::Update (the ROI mass comes out of the update's own loop).
   double Update(const BeamContext& ctx, std::size_t outcome);
   void Weights(const BeamContext& ctx, std::vector<double>* weights) const;  // N + 1, unnormalised
-  void TailMasses(const BeamContext& ctx, const std::vector<std::uint32_t>& cells,
-                  std::vector<double>* out) const;
+  void TailMasses(const BeamContext& ctx, const std::uint32_t* cells, std::size_t count,
+                  double* out) const;
   // As DenseBeam::TailSpan: one walk of the list, a running sum through the span.
   void TailSpan(const BeamContext& ctx, std::uint32_t first, std::uint32_t last,
                 std::vector<double>* out, double* total) const;
@@ -188,6 +188,7 @@ class UllBeam {
   std::size_t Explode(const BeamContext& ctx, std::size_t begin, std::size_t end);
   double CompositeSum(const BeamContext& ctx, const Composite& c) const;
   void Renormalise(const BeamContext& ctx);
+  void Resum(const BeamContext& ctx);  // total_ summed exactly again (no weight changes)
   // Profile's steps. S at the start of every composite (s_at[k], k < list size) and after the
   // last one (s_at[list size], B_{N+1} alone).
   void TailsAtComposites(const BeamContext& ctx, double* s_at) const;
@@ -208,6 +209,16 @@ class UllBeam {
   std::vector<double> pool_;
   double w_all_free_ = 0.0;  // B_{N+1}
   double total_ = 1.0;
+  // A bound on |total_ - the weights' exact sum|: the total is summed afresh (Resum) before
+  // it exceeds kMaxTotalError of the total, and an EC's sum is derived from it (total_ less
+  // the rest, as TailsAtComposites does) only while it is within kDerivedError of that sum.
+  double total_error_ = 0.0;
+  static constexpr double kSumError = 1e-13;    // of a fresh sum
+  static constexpr double kUpdateError = 1e-13;  // of an update, per unit of weight
+  static constexpr double kMaxTotalError = 1e-11;
+  static constexpr double kDerivedError = 1e-8;
+  static constexpr double kRoundingError = 1e-16;  // of a sum, per term, of the sum
+  static constexpr double kTailError = 1e-9;       // TailMasses' tolerance, of each tail
   bool touched_ = false;
   // The EC of the last update ([ec_first_, ec_end_) at pool offset ec_pool_; ec_end_ = 0: none):
   // a steady-state update whose ROI lies inside it needs neither the list nor a search.
@@ -232,8 +243,8 @@ class BeamStore {
   };
   virtual void UpdateMany(const BeamOutcome* updates, std::size_t count, double* roi_masses) = 0;
   virtual void Weights(std::size_t beam, std::vector<double>* weights) const = 0;
-  virtual void TailMasses(std::size_t beam, const std::vector<std::uint32_t>& cells,
-                          std::vector<double>* out) const = 0;
+  virtual void TailMasses(std::size_t beam, const std::uint32_t* cells, std::size_t count,
+                          double* out) const = 0;
   virtual void TailSpan(std::size_t beam, std::uint32_t first, std::uint32_t last,
                         std::vector<double>* out, double* total) const = 0;
   [[nodiscard]] virtual std::uint32_t TailDropCell(std::size_t beam, std::uint32_t from,

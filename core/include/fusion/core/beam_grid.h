@@ -16,6 +16,17 @@
 
 namespace fusion {
 
+// The cell edge a range rounds to in a beam of n cells of cell_size_m (BeamGrid::CellOf; inline
+// for a render, which asks for every crossing): the nearest edge, NaN and negatives to 0, at
+// most n. The cast after the clamps rounds as std::round does for these non-negative values.
+[[nodiscard]] inline std::uint32_t CellOfRange(double range_m, double cell_size_m, std::size_t n) {
+  const double c = range_m / cell_size_m;
+  if (!(c >= 0.0)) return 0;
+  const auto cells = static_cast<double>(n);
+  if (c >= cells) return static_cast<std::uint32_t>(cells);
+  return static_cast<std::uint32_t>(c + 0.5);
+}
+
 class BeamGrid {
  public:
   // Throws std::invalid_argument for an invalid spec (ValidateSensorSpec) or options.
@@ -74,6 +85,10 @@ class BeamGrid {
   // IntervalOccupancy many times about one stretch of a beam (IntervalOccupancyOfCells).
   void TailMassSpan(std::size_t beam, std::uint32_t first, std::uint32_t last,
                     std::vector<double>* tails, double* total) const;
+  // S(c) for `count` ascending cells c (each at most N) of one beam into out[], in one walk:
+  // IntervalOccupancy without its boundaries' rounding (a renderer has the cells already).
+  void TailMasses(std::size_t beam, const std::uint32_t* cells, std::size_t count,
+                  double* out) const;
   // What IntervalOccupancy reports for the cells [a, b) from S(a), S(b) and the beam's total.
   [[nodiscard]] double IntervalOccupancyOfCells(double tail_a, double tail_b, double total,
                                                 std::uint32_t cells) const;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstddef>
 #include <optional>
 #include <vector>
@@ -82,6 +83,9 @@ class BeamTessellation {
   double azimuth_min_rad_ = 0.0;    // the left edge
   double elevation_max_rad_ = 0.0;  // the top edge
   std::optional<PinholeIntrinsics> pinhole_;
+  // An angular grid's centre directions, per column (sin, cos of the azimuth) and per row (of
+  // the elevation): Direction without its trigonometry, to the last bit SubDirection's.
+  std::vector<std::array<double, 2>> col_sin_cos_, row_sin_cos_;
   // Ascending edges (n + 1 values) with a uniform bucket index over them, so that the inner
   // edges below a value are counted in ~one step instead of a binary search.
   class Edges {
