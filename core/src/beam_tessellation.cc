@@ -87,27 +87,6 @@ BeamTessellation::Edges::Edges(std::vector<double> edges) : edges_(std::move(edg
   }
 }
 
-int BeamTessellation::Edges::Start(double v) const {
-  const double bucket = (v - edges_.front()) * inverse_bucket_;
-  const auto b = static_cast<std::size_t>(
-      std::clamp(bucket, 0.0, static_cast<double>(start_.size() - 1)));
-  return start_[b];
-}
-
-int BeamTessellation::Edges::InnerAtOrBelow(double v) const {
-  const int inner = static_cast<int>(edges_.size()) - 2;
-  int count = Start(v);
-  while (count < inner && edges_[static_cast<std::size_t>(count) + 1] <= v) ++count;
-  return count;
-}
-
-int BeamTessellation::Edges::InnerBelow(double v) const {
-  const int inner = static_cast<int>(edges_.size()) - 2;
-  int count = Start(v);
-  while (count < inner && edges_[static_cast<std::size_t>(count) + 1] < v) ++count;
-  return count;
-}
-
 std::size_t BeamTessellation::beam_count() const {
   return static_cast<std::size_t>(cols_) * static_cast<std::size_t>(rows_);
 }
@@ -141,16 +120,6 @@ std::optional<std::size_t> BeamTessellation::BeamOf(const Eigen::Vector3d& p_sen
   const int row = (rows_ - 1) - tan_row_edges_.InnerBelow(tan_elevation);
   return static_cast<std::size_t>(row) * static_cast<std::size_t>(cols_) +
          static_cast<std::size_t>(col);
-}
-
-int BeamTessellation::ColumnOfTangent(double tan_azimuth) const {
-  const double v = std::clamp(tan_azimuth, tan_col_edges_.lo(), tan_col_edges_.hi());
-  return tan_col_edges_.InnerAtOrBelow(v);
-}
-
-int BeamTessellation::RowOfTangent(double tan_elevation) const {
-  const double v = std::clamp(tan_elevation, tan_row_edges_.lo(), tan_row_edges_.hi());
-  return (rows_ - 1) - tan_row_edges_.InnerBelow(v);
 }
 
 std::optional<std::size_t> BeamTessellation::BeamOfByAngles(const Eigen::Vector3d& p_sensor) const {

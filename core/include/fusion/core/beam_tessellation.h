@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <optional>
@@ -111,5 +112,37 @@ class BeamTessellation {
   Edges tan_col_edges_;
   Edges tan_row_edges_;
 };
+
+// Inline: an octree descent asks for the beams of every block it classifies.
+inline int BeamTessellation::Edges::Start(double v) const {
+  const double bucket = (v - edges_.front()) * inverse_bucket_;
+  const auto b = static_cast<std::size_t>(
+      std::clamp(bucket, 0.0, static_cast<double>(start_.size() - 1)));
+  return start_[b];
+}
+
+inline int BeamTessellation::Edges::InnerAtOrBelow(double v) const {
+  const int inner = static_cast<int>(edges_.size()) - 2;
+  int count = Start(v);
+  while (count < inner && edges_[static_cast<std::size_t>(count) + 1] <= v) ++count;
+  return count;
+}
+
+inline int BeamTessellation::Edges::InnerBelow(double v) const {
+  const int inner = static_cast<int>(edges_.size()) - 2;
+  int count = Start(v);
+  while (count < inner && edges_[static_cast<std::size_t>(count) + 1] < v) ++count;
+  return count;
+}
+
+inline int BeamTessellation::ColumnOfTangent(double tan_azimuth) const {
+  const double v = std::clamp(tan_azimuth, tan_col_edges_.lo(), tan_col_edges_.hi());
+  return tan_col_edges_.InnerAtOrBelow(v);
+}
+
+inline int BeamTessellation::RowOfTangent(double tan_elevation) const {
+  const double v = std::clamp(tan_elevation, tan_row_edges_.lo(), tan_row_edges_.hi());
+  return (rows_ - 1) - tan_row_edges_.InnerBelow(v);
+}
 
 }  // namespace fusion
