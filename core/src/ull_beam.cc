@@ -26,6 +26,23 @@ double PoolSum(const double* v, std::size_t n) {
   for (; t < n; ++t) a += v[t];
   return (a + b) + (c + d);
 }
+
+// Room for S at every composite's start and after the last (TailsAtComposites): on the stack
+// for the usual short list, in a per-thread vector beyond (renders read beams from several
+// threads; Profile and TailMasses never hold one while calling the other).
+class TailBuffer {
+ public:
+  double* For(std::size_t composites) {
+    if (composites + 1 <= kLocal) return local_;
+    thread_local std::vector<double> heap;
+    heap.resize(composites + 1);
+    return heap.data();
+  }
+
+ private:
+  static constexpr std::size_t kLocal = 33;
+  double local_[kLocal];
+};
 }  // namespace
 
 UllBeam::UllBeam(const BeamContext& ctx) { Reset(ctx); }
@@ -387,14 +404,8 @@ BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from, do
   const std::size_t n = ctx.cell_count();
   const std::size_t start = std::min<std::size_t>(from, n);
   // S at the start of every composite (s_at[k]), and after the last one (B_{N+1} alone).
-  constexpr std::size_t kLocal = 32;
-  double s_local[kLocal + 1];
-  thread_local std::vector<double> s_heap;
-  double* s_at = s_local;
-  if (list_.size() + 1 > kLocal + 1) {
-    s_heap.resize(list_.size() + 1);
-    s_at = s_heap.data();
-  }
+  TailBuffer buffer;
+  double* s_at = buffer.For(list_.size());
   TailsAtComposites(ctx, s_at);
   BeamProfileCells out;
   FreeZoneTails zone = ScanFreeZone(ctx, s_at, start, free_ratio, &out);
@@ -413,17 +424,11 @@ BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from, do
 void UllBeam::TailMasses(const BeamContext& ctx, const std::uint32_t* cells, std::size_t count,
                          double* out) const {
   const std::size_t n = ctx.cell_count();
-  constexpr std::size_t kLocal = 32;
-  double s_local[kLocal + 1];
-  thread_local std::vector<double> s_heap;
-  double* s_at = s_local;
-  if (list_.size() + 1 > kLocal + 1) {
-    s_heap.resize(list_.size() + 1);
-    s_at = s_heap.data();
-  }
   // S at every composite's start (the usual beam's one EC derived, as Profile does), then each
   // cell (ascending) from its composite: a UEC in closed form; an EC by a running sum from its
-  // start while that keeps most of S, exactly from its end past that (no cancellation).
+  // start while that is within kTailError, exactly from its end past that (no cancellation).
+  TailBuffer buffer;
+  double* s_at = buffer.For(list_.size());
   TailsAtComposites(ctx, s_at);
   std::size_t k = 0;
   std::size_t prefix_k = list_.size(), prefix_cells = 0;
