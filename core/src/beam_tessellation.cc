@@ -54,11 +54,11 @@ BeamTessellation::BeamTessellation(const SensorSpec& spec)
   }
   if (!pinhole_) {
     for (int c = 0; c < cols_; ++c) {
-      const double azimuth = azimuth_min_rad_ + (c + 0.5 + 0.0) * beam_width_h_rad();
+      const double azimuth = azimuth_min_rad_ + (c + 0.5) * beam_width_h_rad();
       col_sin_cos_.push_back({std::sin(azimuth), std::cos(azimuth)});
     }
     for (int r = 0; r < rows_; ++r) {
-      const double elevation = elevation_max_rad_ - (r + 0.5 - 0.0) * beam_width_v_rad();
+      const double elevation = elevation_max_rad_ - (r + 0.5) * beam_width_v_rad();
       row_sin_cos_.push_back({std::sin(elevation), std::cos(elevation)});
     }
   }

@@ -62,9 +62,8 @@ void UllBeam::Reset(const BeamContext& ctx) {
                      0, 0, ctx.prior() * ctx.RhoPow(visible)});
   }
   w_all_free_ = ctx.RhoPow(n);
-  total_ = w_all_free_;
   ec_first_ = ec_end_ = ec_pool_ = 0;
-  for (const Composite& c : list_) total_ += CompositeSum(ctx, c);
+  total_ = ExactTotal(ctx);
   total_error_ = kSumError * total_;
   touched_ = false;
 }
@@ -224,17 +223,21 @@ double UllBeam::Update(const BeamContext& ctx, std::size_t outcome) {
   return mass;
 }
 
-void UllBeam::Resum(const BeamContext& ctx) {
+double UllBeam::ExactTotal(const BeamContext& ctx) const {
   double exact = w_all_free_;
   for (const Composite& c : list_) exact += CompositeSum(ctx, c);
+  return exact;
+}
+
+void UllBeam::Resum(const BeamContext& ctx) {
+  const double exact = ExactTotal(ctx);
   total_ = exact;
   total_error_ = kSumError * exact;
   if (!(total_ >= kLowTotal && total_ <= kHighTotal)) Renormalise(ctx);
 }
 
 void UllBeam::Renormalise(const BeamContext& ctx) {
-  double exact = w_all_free_;
-  for (const Composite& c : list_) exact += CompositeSum(ctx, c);
+  const double exact = ExactTotal(ctx);
   if (!(exact > 0.0) || !std::isfinite(exact)) {  // impossible outcome: start afresh
     Reset(ctx);
     touched_ = true;

@@ -189,6 +189,7 @@ class UllBeam {
   double CompositeSum(const BeamContext& ctx, const Composite& c) const;
   void Renormalise(const BeamContext& ctx);
   void Resum(const BeamContext& ctx);  // total_ summed exactly again (no weight changes)
+  [[nodiscard]] double ExactTotal(const BeamContext& ctx) const;  // every weight, summed
   // Profile's steps. S at the start of every composite (s_at[k], k < list size) and after the
   // last one (s_at[list size], B_{N+1} alone).
   void TailsAtComposites(const BeamContext& ctx, double* s_at) const;
