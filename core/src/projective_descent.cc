@@ -81,6 +81,13 @@ class Descent {
   // The history holds the whole block at or below the free clamp, and no other live
   // contribution says anything there.
   [[nodiscard]] bool Saturated(const MapHere& m) const;
+  // A ray crossed the voxel in a beam's first-hit mass with occupied evidence.
+  [[nodiscard]] bool TracedOccupied(const std::array<int, 3>& key) const {
+    const auto traced = traced_.LogOddsOf(octomap::OcTreeKey(
+        static_cast<octomap::key_type>(key[0]), static_cast<octomap::key_type>(key[1]),
+        static_cast<octomap::key_type>(key[2])));
+    return traced && *traced > 0.0;
+  }
   [[nodiscard]] TanBounds Bounds(double inset) const;
   // The known region that applies at the near / far end of a box.
   [[nodiscard]] const TanBounds& KnownAt(double r2) const {
@@ -197,6 +204,17 @@ inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key
   for (int child = 0; child < 8; ++child) {
     const int cx = child & 1, cy = (child >> 1) & 1, cz = (child >> 2) & 1;
     const MapHere child_map = ChildMap(map, depth, key_min, child, &next);
+    const std::array<int, 3> k = {key_min[0] + cx * half, key_min[1] + cy * half,
+                                  key_min[2] + cz * half};
+    // Where the map holds the child free at the clamp, it emits nothing unless it is a voxel a
+    // ray crossed with occupied evidence: under a parent free through every beam it is free,
+    // free through or unknown, and a voxel is else free at most (VisitVoxel). Its geometry is
+    // then not needed.
+    const bool saturated = Saturated(child_map);
+    if (saturated && (free_through || (child_depth == kTreeDepth && !TracedOccupied(k)))) {
+      ++stats_->skipped_saturated;
+      continue;
+    }
     Box box;
     box.size = child_size;
     box.lo = lo + Eigen::Vector3d(cx, cy, cz) * child_size;
@@ -204,11 +222,8 @@ inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key
     box.r_hi2 = far2[0][cx] + far2[1][cy] + far2[2][cz];
     if (box.r_hi2 <= t_start2_ || box.r_lo2 >= global_far2_) continue;
     ChildAngles(point, child, &box);
-    const std::array<int, 3> k = {key_min[0] + cx * half, key_min[1] + cy * half,
-                                  key_min[2] + cz * half};
     const Verdict v = Classify(child_depth, box, beams, free_through);
-    if (Saturated(child_map) &&
-        (v.kind == Kind::kFree || (v.kind == Kind::kMixed && v.free_through))) {
+    if (saturated && (v.kind == Kind::kFree || (v.kind == Kind::kMixed && v.free_through))) {
       ++stats_->skipped_saturated;
       continue;  // free where the map is held free at the clamp already
     }
@@ -219,7 +234,7 @@ inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key
     if (v.kind == Kind::kFree) {
       Emit(child_depth, k, v.free_value);
     } else if (child_depth == kTreeDepth) {
-      VisitVoxel(k, box, v, Saturated(child_map));
+      VisitVoxel(k, box, v, saturated);
     } else {
       VisitChildren(child_depth, k, v.beams, v.free_through, child_map);
     }
