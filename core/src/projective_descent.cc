@@ -29,8 +29,7 @@ class Descent {
   // mass; t_start: where every ray starts; global_far: the largest Aggregate::max_far.
   Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
           const RenderOptions& options, const BeamPyramid& pyramid, const LocalGrid& traced,
-          double t_start, float global_far, const SaturatedFree* skip,
-          std::vector<Eigen::Vector3f>* directions, std::vector<std::uint8_t>* have_direction,
+          double t_start, float global_far, const SaturatedFree* skip, DescentBuffers* buffers,
           RenderedGrid* out, RenderStats* stats);
 
   static constexpr std::size_t kMaxOthers = 8;
@@ -81,13 +80,9 @@ class Descent {
   // The history holds the whole block at or below the free clamp, and no other live
   // contribution says anything there.
   [[nodiscard]] bool Saturated(const MapHere& m) const;
-  // A ray crossed the voxel in a beam's first-hit mass with occupied evidence.
-  [[nodiscard]] bool TracedOccupied(const std::array<int, 3>& key) const {
-    const auto traced = traced_.LogOddsOf(octomap::OcTreeKey(
-        static_cast<octomap::key_type>(key[0]), static_cast<octomap::key_type>(key[1]),
-        static_cast<octomap::key_type>(key[2])));
-    return traced && *traced > 0.0;
-  }
+  // A ray crossed a voxel of the block (its first key, its depth) in a beam's first-hit mass
+  // with occupied evidence.
+  [[nodiscard]] bool HoldsTracedOccupied(const std::array<int, 3>& key_min, unsigned depth) const;
   [[nodiscard]] TanBounds Bounds(double inset) const;
   // The known region that applies at the near / far end of a box.
   [[nodiscard]] const TanBounds& KnownAt(double r2) const {
@@ -127,7 +122,8 @@ class Descent {
   std::vector<double> row_centres_;  // tangent of each row's centre elevation, descending
   std::vector<Eigen::Vector3f>& directions_;
   std::vector<std::uint8_t>& have_direction_;
-  bool directions_ready_ = false;  // have_direction_ cleared for this render
+  const std::vector<std::uint64_t>& occupied_codes_;  // filled where the map may be saturated
+  bool directions_ready_ = false;                     // have_direction_ cleared for this render
   double r_split2_ = 0.0;
   double t_start2_ = 0.0;
   double global_far2_ = 0.0;
@@ -146,8 +142,7 @@ std::size_t g_counts[17][3][2];
 inline Descent::Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                         const RenderOptions& options, const BeamPyramid& pyramid,
                         const LocalGrid& traced, double t_start, float global_far,
-                        const SaturatedFree* skip, std::vector<Eigen::Vector3f>* directions,
-                        std::vector<std::uint8_t>* have_direction, RenderedGrid* out,
+                        const SaturatedFree* skip, DescentBuffers* buffers, RenderedGrid* out,
                         RenderStats* stats)
     : tess_(grid.tessellation()),
       skip_(skip != nullptr && skip->history != nullptr && skip->others.size() <= kMaxOthers
@@ -163,8 +158,9 @@ inline Descent::Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_s
       global_far_(global_far),
       out_(out),
       stats_(stats),
-      directions_(*directions),
-      have_direction_(*have_direction) {
+      directions_(buffers->directions),
+      have_direction_(buffers->have_direction),
+      occupied_codes_(buffers->occupied_codes) {
   // Known space ends where the outermost rays of the ray-traced render run: the centre lines of
   // the edge beams, and beyond r_split (where beams outgrow a voxel) their outermost sub-rays,
   // 1 / (2 k) of a beam from the edge of the field of view.
@@ -185,6 +181,14 @@ inline Descent::Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_s
   cone2_ = 1.0 / (1.0 + ta * ta + te * te * (1.0 + ta * ta));
   t_start2_ = t_start_ * t_start_;
   global_far2_ = Square(global_far_);
+  std::vector<std::uint64_t>& codes = buffers->occupied_codes;
+  codes.clear();
+  if (skip_ != nullptr) {
+    traced.ForEachLogOdds([&codes](const octomap::OcTreeKey& key, float log_odds) {
+      if (log_odds > 0.0f) codes.push_back(MortonOf(key));
+    });
+    std::sort(codes.begin(), codes.end());
+  }
 }
 
 inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key_min,
@@ -206,12 +210,12 @@ inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key
     const MapHere child_map = ChildMap(map, depth, key_min, child, &next);
     const std::array<int, 3> k = {key_min[0] + cx * half, key_min[1] + cy * half,
                                   key_min[2] + cz * half};
-    // Where the map holds the child free at the clamp, it emits nothing unless it is a voxel a
-    // ray crossed with occupied evidence: under a parent free through every beam it is free,
-    // free through or unknown, and a voxel is else free at most (VisitVoxel). Its geometry is
-    // then not needed.
+    // Where the map holds the child free at the clamp, it emits nothing but voxels a ray crossed
+    // with occupied evidence: under a parent free through every beam it is free, free through
+    // or unknown, and a voxel without such evidence is free at most (VisitVoxel). Its geometry
+    // is then not needed.
     const bool saturated = Saturated(child_map);
-    if (saturated && (free_through || (child_depth == kTreeDepth && !TracedOccupied(k)))) {
+    if (saturated && (free_through || !HoldsTracedOccupied(k, child_depth))) {
       ++stats_->skipped_saturated;
       continue;
     }
@@ -298,6 +302,14 @@ inline bool Descent::Saturated(const MapHere& m) const {
     if (m.lo[i] != m.hi[i]) return false;
   }
   return true;
+}
+
+inline bool Descent::HoldsTracedOccupied(const std::array<int, 3>& key_min, unsigned depth) const {
+  const std::uint64_t code = MortonOf(octomap::OcTreeKey(
+      static_cast<octomap::key_type>(key_min[0]), static_cast<octomap::key_type>(key_min[1]),
+      static_cast<octomap::key_type>(key_min[2])));
+  const auto it = std::lower_bound(occupied_codes_.begin(), occupied_codes_.end(), code);
+  return it != occupied_codes_.end() && *it < code + MortonSpan(depth);
 }
 
 inline Descent::TanBounds Descent::Bounds(double inset) const {
@@ -444,11 +456,10 @@ inline void Descent::Emit(unsigned depth, const std::array<int, 3>& key_min, flo
 void DescendOctree(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                    const RenderOptions& options, const BeamPyramid& pyramid,
                    const LocalGrid& traced, double t_start, float global_far,
-                   const SaturatedFree* skip, std::vector<Eigen::Vector3f>* directions,
-                   std::vector<std::uint8_t>* have_direction, RenderedGrid* out,
+                   const SaturatedFree* skip, DescentBuffers* buffers, RenderedGrid* out,
                    RenderStats* stats) {
   Descent descent(grid, T_world_sensor, options, pyramid, traced, t_start, global_far, skip,
-                  directions, have_direction, out, stats);
+                  buffers, out, stats);
   Aggregate everything;
   everything.touched = everything.beams = 1;
   descent.VisitChildren(0, {0, 0, 0}, everything, /*free_through=*/false, descent.RootMap());

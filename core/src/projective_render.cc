@@ -112,8 +112,8 @@ void RenderScratch::Recycle(RenderedGrid&& spent) {
 std::size_t RenderScratch::MemoryBytes() const {
   const Buffers& b = *buffers_;
   std::size_t bytes = sizeof(Buffers) + b.profiles.capacity() * sizeof(BeamProfile) +
-                      b.pyramid.MemoryBytes() + b.directions.capacity() * sizeof(Eigen::Vector3f) +
-                      b.have_direction.capacity() + b.nodes.capacity() * sizeof(MapNode);
+                      b.pyramid.MemoryBytes() + b.descent.MemoryBytes() +
+                      b.nodes.capacity() * sizeof(MapNode);
   for (const LocalGrid& g : b.traced) bytes += g.MemoryBytes();
   return bytes;
 }
@@ -143,8 +143,7 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
   buffers.nodes = {};
   if (s.beams_rendered > 0) {
     detail::DescendOctree(grid, T_world_sensor, options, buffers.pyramid, buffers.traced[0],
-                          t_start, global_far, skip, &buffers.directions, &buffers.have_direction,
-                          &out, &s);
+                          t_start, global_far, skip, &buffers.descent, &out, &s);
   }
   if (stats != nullptr) *stats = s;
   return out;
