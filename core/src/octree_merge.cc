@@ -105,9 +105,10 @@ Cursor GridCursor(const MapNode* lo, const MapNode* hi, unsigned depth) {
   return c;
 }
 
-// End of the nodes of [lo, hi) (ascending codes) that start before `code`: a short scan for
-// the few nodes a fine region holds, a binary search for many.
+// End of the nodes of [lo, hi) (ascending codes) that start before `code`: none when the first
+// does not, a short scan for the few nodes a fine region holds, a binary search for many.
 const MapNode* Before(const MapNode* lo, const MapNode* hi, std::uint64_t code) {
+  if (lo == hi || lo->code >= code) return lo;
   if (hi - lo <= 16) {
     while (lo != hi && lo->code < code) ++lo;
     return lo;
@@ -116,27 +117,32 @@ const MapNode* Before(const MapNode* lo, const MapNode* hi, std::uint64_t code) 
                           [](const MapNode& n, std::uint64_t c) { return n.code < c; });
 }
 
-// Cursor of child `child` of a region at `depth` starting at `code`. For a grid, `*next` is
-// where the child's nodes begin (the end of the previous child's); it is moved past them.
-Cursor ChildCursor(const Cursor& parent, const octomap::OcTree* tree, unsigned depth,
-                   std::uint64_t code, unsigned child, const MapNode** next) {
+// *out := the cursor of child `child` of a region at `depth` starting at `code`. For a grid,
+// `*next` is where the nodes not yet handed to a child begin; children may be skipped, and the
+// cursor starts at the child's own first node. `*next` is moved past the child's nodes.
+void ChildCursor(const Cursor& parent, const octomap::OcTree* tree, unsigned depth,
+                 std::uint64_t code, unsigned child, const MapNode** next, Cursor* out) {
   switch (parent.kind) {
     case Cursor::kNone:
     case Cursor::kUniform:
-      return parent;
+      *out = parent;
+      return;
     case Cursor::kTree:
-      return TreeCursor(*tree, tree->nodeChildExists(parent.node, child)
+      *out = TreeCursor(*tree, tree->nodeChildExists(parent.node, child)
                                    ? tree->getNodeChild(parent.node, child)
                                    : nullptr);
+      return;
     case Cursor::kGrid: {
-      const std::uint64_t end = code + (child + 1) * MortonSpan(depth + 1);
-      const MapNode* lo = *next;
-      const MapNode* hi = Before(lo, parent.hi, end);
+      const std::uint64_t span = MortonSpan(depth + 1);
+      const std::uint64_t begin = code + child * span;
+      const MapNode* lo = Before(*next, parent.hi, begin);
+      const MapNode* hi = Before(lo, parent.hi, begin + span);
       *next = hi;
-      return GridCursor(lo, hi, depth + 1);
+      *out = GridCursor(lo, hi, depth + 1);
+      return;
     }
   }
-  return {};
+  *out = Cursor{};
 }
 
 // One merge: the target, the sources and drivers, and how opinions become a value.
@@ -202,15 +208,17 @@ class Merge {
     for (unsigned child = 0; child < 8; ++child) {
       bool driven = false;
       for (std::size_t i = 0; i < n_drivers_; ++i) {
-        below.drivers[i] = ChildCursor(here.drivers[i], nullptr, depth, code, child, &next_driver[i]);
+        ChildCursor(here.drivers[i], nullptr, depth, code, child, &next_driver[i],
+                    &below.drivers[i]);
         driven |= below.drivers[i].kind != Cursor::kNone;
       }
-      // Sources are read on: a grid's next child starts where this one ends.
+      // Sources only where a driver leads: a tree's children are not even looked at elsewhere.
+      if (!driven) continue;
       for (std::size_t i = 0; i < n_sources_; ++i) {
-        below.sources[i] =
-            ChildCursor(here.sources[i], source_trees_[i], depth, code, child, &next_source[i]);
+        ChildCursor(here.sources[i], source_trees_[i], depth, code, child, &next_source[i],
+                    &below.sources[i]);
       }
-      if (driven) Visit(depth + 1, code + child * span, node, child);
+      Visit(depth + 1, code + child * span, node, child);
     }
     Settle(parent, index, node);
   }

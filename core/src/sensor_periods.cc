@@ -66,6 +66,14 @@ bool SensorPeriods::Moved(const Eigen::Isometry3d& T_world_sensor) const {
   return translation_m > pose_tolerance_m_ || std::abs(delta.angle()) > pose_tolerance_rad_;
 }
 
+bool SensorPeriods::WouldSeal(const Eigen::Isometry3d& T_world_sensor) const {
+  if (!ValidPose(T_world_sensor) || open_->frames == 0) return false;
+  if (map_resolution_m_ > 0.0 && !InsideMap(T_world_sensor.translation(), map_resolution_m_)) {
+    return false;
+  }
+  return Moved(T_world_sensor);
+}
+
 const float* SensorPeriods::InsideMapOnly(const Eigen::Isometry3d& T_world_frame,
                                           const float* points, std::size_t point_count,
                                           const std::vector<std::uint8_t>& beyond_range,

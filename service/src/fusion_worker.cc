@@ -19,6 +19,11 @@ struct FusionWorker::Lane {
   mutable std::mutex mutex;  // guards periods (the integrator, a render of the open period)
   // Null for a camera that waits for its CameraInfo (DefineSensor makes it).
   std::unique_ptr<SensorPeriods> periods;
+  // Under mutex: the period whose grid the renderer reads without holding mutex (RenderOpen),
+  // and the integrator's wait for it. A cloud that seals that period does not wait: it leaves
+  // the grid as it is and starts a new period.
+  const Period* rendering = nullptr;
+  std::condition_variable rendered_cv;
   // The spec its beam grid has, for SpecOf (which must not wait for a render of the period).
   mutable std::mutex spec_mutex;
   std::optional<SensorSpec> spec;
@@ -28,6 +33,10 @@ struct FusionWorker::Lane {
   // Guarded by work_mutex_.
   std::size_t sealed_waiting = 0;  // sealed periods not yet committed
   bool dirty = false;              // the open period has frames its last render did not see
+  // The open period's first frame came in and the map shows none of the period: rendered at
+  // once (not after render_interval), so a moving sensor's frame is in the map without waiting
+  // for the next frame to seal it; that render is then the one its commit uses.
+  bool fresh = false;
   // The integrator's own: points outside the map are logged at most once a second.
   std::chrono::steady_clock::time_point last_outside_log{};
   std::uint64_t outside_not_logged = 0;
@@ -201,14 +210,20 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   PeriodIntegration result;
   std::unique_ptr<Period> sealed;
   MapStatus status = MapStatus::kInvalidArgument;
+  bool opened = false;
   {
-    std::lock_guard<std::mutex> lock(lane->mutex);
+    std::unique_lock<std::mutex> lock(lane->mutex);
     if (!lane->periods) {  // only a fusion/points cloud can come before the CameraInfo
       queues_->CountRejected(cloud.sensor_id, RejectReason::kNoCameraInfo);
       rejections_.Log(RejectReason::kNoCameraInfo, cloud.sensor_id,
                       "the sensor has no beams before its first CameraInfo");
       return;
     }
+    // Into a period the renderer is reading only after that render; sealing it leaves it alone.
+    lane->rendered_cv.wait(lock, [&] {
+      return lane->rendering != &lane->periods->open() ||
+             (may_seal && lane->periods->WouldSeal(T_world_sensor));
+    });
     const auto start = options_.histograms.integration_seconds ? Clock::now() : Clock::time_point{};
     try {
       status = lane->periods->Integrate(T_world_sensor, cloud.xyz.data(), cloud.xyz.size() / 3,
@@ -220,6 +235,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
     }
     ObserveIntegration(*lane, cloud, start, status);
     lane->counters->memory_bytes.store(lane->periods->MemoryBytes());
+    opened = status == MapStatus::kOk && lane->periods->open().frames == 1;
   }
   if (status != MapStatus::kOk) {
     spdlog::warn("worker: cloud {} of '{}' not integrated: {}", cloud.sequence_number,
@@ -233,6 +249,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
       ++lane->sealed_waiting;
     }
     lane->dirty = true;
+    lane->fresh = lane->fresh || opened;
   }
   work_cv_.notify_one();
   integrated_.fetch_add(1, std::memory_order_relaxed);
@@ -304,8 +321,7 @@ void FusionWorker::RendererLoop() {
     work_cv_.wait_until(lock, next, [&] {
       if (!sealed_.empty() || integrator_done_) return true;
       for (const auto& lane : lanes_) {
-        if (lane->dirty && lane->sealed_waiting == 0 &&
-            Clock::now() >= lane->last_open_render + options_.render_interval) {
+        if (lane->dirty && lane->sealed_waiting == 0 && OpenRenderDue(*lane, Clock::now())) {
           return true;
         }
       }
@@ -333,9 +349,10 @@ bool FusionWorker::RenderStep() {
   for (const auto& lane : lanes_) {
     {
       std::lock_guard<std::mutex> lock(work_mutex_);
-      const bool due = integrator_done_ || now >= lane->last_open_render + options_.render_interval;
+      const bool due = integrator_done_ || OpenRenderDue(*lane, now);
       if (!lane->dirty || lane->sealed_waiting > 0 || !due) continue;
       lane->dirty = false;
+      lane->fresh = false;
     }
     if (RenderOpen(*lane)) {
       PublishLocked();
@@ -343,6 +360,10 @@ bool FusionWorker::RenderStep() {
     }
   }
   return false;
+}
+
+bool FusionWorker::OpenRenderDue(const Lane& lane, Clock::time_point now) const {
+  return lane.fresh || now >= lane.last_open_render + options_.render_interval;
 }
 
 bool FusionWorker::ForgetStep(std::chrono::steady_clock::time_point now) {
@@ -398,31 +419,43 @@ void FusionWorker::CommitSealed(Sealed sealed) {
 bool FusionWorker::RenderOpen(Lane& lane) {
   RenderedGrid grid(options_.map.resolution_m);
   std::uint64_t sequence = 0, frames = 0;
+  const Period* open = nullptr;
   const auto start = std::chrono::steady_clock::now();
   {
-    // The sensor's integration waits for this render of its own open period.
     std::lock_guard<std::mutex> lock(lane.mutex);
     {
       std::lock_guard<std::mutex> work(work_mutex_);
       if (lane.sealed_waiting > 0) return false;  // sealed meanwhile: commit that first
     }
-    const Period& open = lane.periods->open();
-    if (open.frames == 0 || (open.sequence == lane.live_sequence && open.frames == lane.live_frames)) {
+    open = &lane.periods->open();
+    if (open->frames == 0 ||
+        (open->sequence == lane.live_sequence && open->frames == lane.live_frames)) {
       return false;
     }
-    try {
-      const SaturatedFree skip = map_->Saturation(lane.setup->id);
-      const Clock::time_point render_start = Clock::now();
-      grid = Render(*open.grid, open.T_world_sensor, render_options_, nullptr, &skip,
-                    &map_->render_scratch());
-      if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(render_start));
-    } catch (const std::exception& e) {
-      spdlog::error("worker: render of '{}' failed: {}", lane.setup->id, e.what());
-      return false;
-    }
-    sequence = open.sequence;
-    frames = open.frames;
+    sequence = open->sequence;
+    frames = open->frames;
+    // The integrator leaves this grid alone until the render is done, unless it seals the
+    // period (then the period waits, unchanged, among the sealed ones: this render serves its
+    // commit). Sealed periods are consumed only here, on the renderer's thread.
+    lane.rendering = open;
   }
+  bool rendered = true;
+  try {
+    const SaturatedFree skip = map_->Saturation(lane.setup->id);
+    const Clock::time_point render_start = Clock::now();
+    grid = Render(*open->grid, open->T_world_sensor, render_options_, nullptr, &skip,
+                  &map_->render_scratch());
+    if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(render_start));
+  } catch (const std::exception& e) {
+    spdlog::error("worker: render of '{}' failed: {}", lane.setup->id, e.what());
+    rendered = false;
+  }
+  {
+    std::lock_guard<std::mutex> lock(lane.mutex);
+    lane.rendering = nullptr;
+  }
+  lane.rendered_cv.notify_all();
+  if (!rendered) return false;
   (void)map_->ReplaceLive(lane.setup->id, std::move(grid));
   lane.live_sequence = sequence;
   lane.live_frames = frames;

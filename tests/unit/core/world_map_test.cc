@@ -170,6 +170,52 @@ TEST_F(WorldMapTest, MovingBeyondToleranceCommitsAndRestarts) {
   EXPECT_GE(map.tree().getNumLeafNodes(), committed_only.getNumLeafNodes());
 }
 
+// WouldSeal says beforehand what Integrate (may_seal) does with the open period, and a cloud
+// that seals it leaves its grid as it was (fusiond's integrator relies on both while the
+// renderer reads that grid).
+TEST_F(WorldMapTest, WouldSealTellsWhetherACloudLeavesTheOpenPeriodAlone) {
+  SensorPeriods periods(spec_, SensorGridOptions(options_), options_.pose_tolerance_m,
+                        options_.pose_tolerance_rad, kRes);
+  const auto frame = Frame();
+  EXPECT_FALSE(periods.WouldSeal(pose_)) << "an empty period takes any cloud";
+  std::unique_ptr<Period> sealed;
+  PeriodIntegration result;
+  ASSERT_EQ(periods.Integrate(pose_, frame.xyz.data(), frame.size(), frame.beyond_range, true,
+                              &result, &sealed),
+            MapStatus::kOk);
+  Eigen::Isometry3d nudged = pose_;
+  nudged.translation().y() += 0.005;
+  Eigen::Isometry3d moved = pose_;
+  moved.translation().x() += 0.05;
+  Eigen::Isometry3d turned = pose_;
+  turned.linear() = turned.linear() * Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitY()).matrix();
+  Eigen::Isometry3d broken = moved;
+  broken.translation().z() = std::nan("");
+  Eigen::Isometry3d outside = pose_;
+  outside.translation().x() = 1e6;
+  EXPECT_FALSE(periods.WouldSeal(pose_));
+  EXPECT_FALSE(periods.WouldSeal(nudged)) << "within the tolerance";
+  EXPECT_TRUE(periods.WouldSeal(moved));
+  EXPECT_TRUE(periods.WouldSeal(turned));
+  EXPECT_FALSE(periods.WouldSeal(broken)) << "refused, not sealed";
+  EXPECT_FALSE(periods.WouldSeal(outside)) << "refused, not sealed";
+
+  const Period* open = &periods.open();
+  const BeamGrid* grid = open->grid.get();
+  const std::vector<double> before = grid->FirstHitProbabilities(0);
+  const auto other = simulator_.Capture(moved);
+  ASSERT_EQ(periods.Integrate(moved, other.xyz.data(), other.size(), other.beyond_range, true,
+                              &result, &sealed),
+            MapStatus::kOk);
+  ASSERT_NE(sealed, nullptr);
+  EXPECT_EQ(sealed.get(), open) << "the same period object, handed over whole";
+  EXPECT_EQ(sealed->grid.get(), grid);
+  EXPECT_EQ(sealed->frames, 1u);
+  EXPECT_EQ(grid->FirstHitProbabilities(0), before);
+  EXPECT_NE(&periods.open(), open);
+  EXPECT_EQ(periods.open().frames, 1u);
+}
+
 TEST_F(WorldMapTest, CommitOnRequestKeepsTheMapAndRestartsTheGrid) {
   WorldMap map(options_);
   ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);

@@ -1,8 +1,9 @@
 // FusionWorker: the published map follows the live map, including voxels that lose their
 // information (deleted from the published octree, not left behind); a moving sensor's periods
 // are committed in order, each cloud counted once (the same map as core's WorldMap fed on one
-// thread); a renderer that falls behind gets clouds merged, never dropped; a cloud of a camera
-// still waiting for its CameraInfo is counted as rejected.
+// thread); a moving sensor's frame is in the map before the next one comes; a renderer that
+// falls behind gets clouds merged, never dropped; a cloud of a camera still waiting for its
+// CameraInfo is counted as rejected.
 #include "fusion/service/fusion_worker.h"
 
 #include <gtest/gtest.h>
@@ -161,6 +162,39 @@ TEST_F(FusionWorkerTest, MovingPeriodsAreCommittedInOrderEachCloudOnce) {
   const auto published = hub_.Current();
   ASSERT_GT(expected.tree().getNumLeafNodes(), 100u);
   EXPECT_EQ(Leaves(*published->tree), Leaves(expected.tree()));
+}
+
+// A moving sensor's frame is rendered when it comes in, not when the next frame seals its
+// period or after render_interval; that render is the one the period's commit uses.
+TEST_F(FusionWorkerTest, AMovingSensorsFrameIsInTheMapBeforeTheNextOne) {
+  WorkerOptions options = Options();
+  options.render_interval = 60s;  // an open period with more frames waits a minute
+  StartWorker(16, 12, options);
+  const auto in_map_within = [&](std::uint64_t clouds, std::chrono::seconds limit) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    while (worker_->in_map() < clouds && std::chrono::steady_clock::now() < end) {
+      std::this_thread::sleep_for(5ms);
+    }
+    return worker_->in_map();
+  };
+  constexpr int kClouds = 3;
+  for (int k = 0; k < kClouds; ++k) {
+    ASSERT_TRUE(queues_.Push(Driving(*tessellation_, k), &never_));
+    EXPECT_EQ(in_map_within(k + 1, 20s), static_cast<std::uint64_t>(k + 1))
+        << "cloud " << k << " waits for another";
+  }
+  EXPECT_EQ(worker_->renders(), static_cast<std::uint64_t>(kClouds)) << "one render a period";
+  // The same map as core's WorldMap with the last period rendered but open.
+  WorldMap expected(options.map);
+  ASSERT_EQ(expected.AddSensor("s", sensor_.spec), MapStatus::kOk);
+  for (int k = 0; k < kClouds; ++k) {
+    const Cloud cloud = Driving(*tessellation_, k);
+    ASSERT_EQ(expected.Integrate("s", cloud.T_world_published, cloud.xyz.data(),
+                                 cloud.xyz.size() / 3),
+              MapStatus::kOk);
+  }
+  ASSERT_EQ(expected.Render("s"), MapStatus::kOk);
+  EXPECT_EQ(Leaves(*hub_.Current()->tree), Leaves(expected.tree()));
 }
 
 double SumOfAbsLogOdds(const octomap::OcTree& tree) {

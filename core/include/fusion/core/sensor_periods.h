@@ -63,6 +63,11 @@ class SensorPeriods {
                       std::size_t point_count, const std::vector<std::uint8_t>& beyond_range,
                       bool may_seal, PeriodIntegration* result, std::unique_ptr<Period>* sealed);
 
+  // True if Integrate with may_seal would seal the open period for a cloud taken at
+  // T_world_sensor: the pose is valid, inside the map, and beyond the tolerance of a non-empty
+  // open period. Such an integration leaves the open period's grid untouched (it goes to
+  // *sealed whole), so it may run while another thread still reads that grid.
+  [[nodiscard]] bool WouldSeal(const Eigen::Isometry3d& T_world_sensor) const;
   // The open period (frames == 0: nothing integrated since it opened).
   [[nodiscard]] const Period& open() const { return *open_; }
   // Seals the open period now (std::nullptr if it is empty) and opens an empty one.

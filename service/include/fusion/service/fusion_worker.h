@@ -8,9 +8,12 @@
 //    reliable ingest (wait_for_renderer) the integrator waits for room instead, so a replayed
 //    recording is mapped exactly as taken.
 //  - The renderer takes sealed periods in order (render, commit into the map's history), and when
-//    none is waiting re-renders open periods with new frames (the sensor's integration waits for
-//    that render of its own period only). After each step it publishes the map: core's WorldMap
-//    hands out a tree that is never written again and its change set, without copying the map.
+//    none is waiting renders open periods with new frames: a period's first frame at once (a
+//    moving sensor's frame is then in the map before the next one seals it, and that render
+//    serves the commit), later frames every render_interval. A cloud for a period being rendered
+//    waits for that render only if it would go into that period; one that seals it does not.
+//    After each step it publishes the map: core's WorldMap hands out a tree that is never
+//    written again and its change set, without copying the map.
 #pragma once
 
 #include <atomic>
@@ -126,6 +129,9 @@ class FusionWorker {
   // Forgetting (map.forget_half_life_s): lets the time since the last step pass over the map's
   // history when it is due; false if it was not.
   bool ForgetStep(std::chrono::steady_clock::time_point now);
+  // Under work_mutex_: the lane's open period may be rendered now (its first frame waits for
+  // nothing; later ones for render_interval after the last render of it).
+  [[nodiscard]] bool OpenRenderDue(const Lane& lane, std::chrono::steady_clock::time_point now) const;
   void CommitSealed(Sealed sealed);
   bool RenderOpen(Lane& lane);
   void PublishLocked();
