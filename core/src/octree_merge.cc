@@ -312,8 +312,10 @@ void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
 }
 
 void CopyRegions(octomap::OcTree& target, const octomap::OcTree& source,
-                 const std::vector<MapRegion>& regions) {
-  RenderedGrid driver(target.getResolution());
+                 const std::vector<MapRegion>& regions, RenderedGrid* scratch) {
+  RenderedGrid own(target.getResolution());
+  RenderedGrid& driver = scratch != nullptr ? *scratch : own;
+  driver.Clear();
   for (const MapRegion& r : regions) driver.Append({r.code, 0.0f, r.depth});
   std::vector<const octomap::OcTree*> trees;
   const std::vector<Cursor> roots = Roots({{&source, nullptr}}, &trees);

@@ -149,7 +149,7 @@ const WorldMap::SensorState* WorldMap::Find(const std::string& sensor_id) const 
 octomap::OcTree& WorldMap::Working() {
   if (working_) return *working_;
   if (spare_ && spare_.use_count() == 1) {
-    CopyRegions(*spare_, *published_, spare_lag_);
+    CopyRegions(*spare_, *published_, spare_lag_, &copy_driver_);
     working_ = std::move(spare_);
   } else {
     if (spare_) ++tree_copies_;
@@ -310,6 +310,7 @@ void WorldMap::MergeRun(std::size_t run_begin) {
   const auto before = [](const MapRegion& a, const MapRegion& b) {
     return a.code != b.code ? a.code < b.code : a.depth < b.depth;
   };
+  if (run_begin == 0 || run_begin == pending_.size()) return;  // one run already
   std::inplace_merge(pending_.begin(), pending_.begin() + static_cast<std::ptrdiff_t>(run_begin),
                      pending_.end(), before);
 }
@@ -319,7 +320,9 @@ Publication WorldMap::Publish() {
   MapChanges changes;
   changes.version = ++version_;
   changes.reset = pending_reset_;
-  changes.regions = std::move(pending_);
+  // A copy of the exact size: pending_ keeps its memory for the next version's changes (grown
+  // afresh, a moving sensor's ~100 k regions a frame came from newly mapped pages each time).
+  changes.regions.assign(pending_.begin(), pending_.end());
   NormaliseRegions(&changes.regions);
   pending_.clear();
   pending_reset_ = false;
@@ -443,7 +446,8 @@ std::size_t WorldMap::MemoryBytes() const {
   if (working_) bytes += working_->memoryUsage();
   if (spare_) bytes += spare_->memoryUsage();
   for (const auto& [id, s] : sensors_) bytes += s->live.MemoryBytes();
-  return bytes + render_scratch_.MemoryBytes();
+  return bytes + render_scratch_.MemoryBytes() + copy_driver_.MemoryBytes() +
+         (pending_.capacity() + spare_lag_.capacity()) * sizeof(MapRegion);
 }
 
 }  // namespace fusion

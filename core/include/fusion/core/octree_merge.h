@@ -48,9 +48,9 @@ void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
                  std::vector<MapRegion>* changed = nullptr);
 
 // target := source in the given regions (ascending codes, disjoint): what source holds there,
-// nothing where it holds nothing.
+// nothing where it holds nothing. `scratch` (may be null): a buffer kept between calls.
 void CopyRegions(octomap::OcTree& target, const octomap::OcTree& source,
-                 const std::vector<MapRegion>& regions);
+                 const std::vector<MapRegion>& regions, RenderedGrid* scratch = nullptr);
 
 // Removes the full-depth voxel `key` from `tree` (splits a pruned node holding it); false if no
 // node holds it. Every other voxel keeps its value.

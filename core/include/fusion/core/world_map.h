@@ -227,7 +227,8 @@ class WorldMap {
   // Fused occupancy of a world point; std::nullopt where the map has no information.
   [[nodiscard]] std::optional<double> Occupancy(const Eigen::Vector3d& p_world) const;
   // Nodes of the committed history, the working and the published trees, and of the live
-  // contributions, and the render buffers kept (render_scratch), in bytes.
+  // contributions, the render buffers kept (render_scratch) and the change lists' buffers, in
+  // bytes.
   [[nodiscard]] std::size_t MemoryBytes() const;
   // Publications that had to copy a tree a reader still held (see the top of this file).
   [[nodiscard]] std::uint64_t tree_copies() const { return tree_copies_; }
@@ -252,6 +253,7 @@ class WorldMap {
   std::shared_ptr<octomap::OcTree> published_;  // never null
   std::shared_ptr<octomap::OcTree> spare_;      // the publication before, reused when free
   std::vector<MapRegion> spare_lag_;            // regions the spare lacks
+  RenderedGrid copy_driver_{1.0};               // CopyRegions' buffer, kept between calls
   std::vector<MapRegion> pending_;              // changed since the last publication
   bool pending_reset_ = false;
   std::uint64_t version_ = 0;
