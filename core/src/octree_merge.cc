@@ -145,21 +145,25 @@ void ChildCursor(const Cursor& parent, const octomap::OcTree* tree, unsigned dep
   *out = Cursor{};
 }
 
-// One merge: the target, the sources and drivers, and how opinions become a value.
+// One merge: the target, the sources and drivers, and how opinions become a value. With a
+// catch-up (a reference tree and the regions where the target lags behind it), the target is
+// first brought to the reference in those regions, in the same walk: where a driver leads the
+// fused value is written at once, elsewhere in the lagging regions the reference's content is
+// copied; a region counts as changed when its fused value differs from the reference's.
 class Merge {
  public:
-  enum class Mode { kFuse, kCopy };
   static constexpr std::size_t kMaxInputs = 16;
 
-  Merge(octomap::OcTree& target, Mode mode, const FusionPolicy& policy,
+  Merge(octomap::OcTree& target, const FusionPolicy& policy,
         std::vector<const octomap::OcTree*> source_trees, std::vector<MapRegion>* changed)
       : target_(target),
-        mode_(mode),
         policy_(policy),
         source_trees_(std::move(source_trees)),
         changed_(changed) {}
 
-  void Run(const std::vector<Cursor>& sources, const std::vector<Cursor>& drivers) {
+  // reference: null, or the tree the target catches up with in the regions `lag` holds.
+  void Run(const std::vector<Cursor>& sources, const std::vector<Cursor>& drivers,
+           const octomap::OcTree* reference = nullptr, const Cursor& lag = {}) {
     if (sources.size() > kMaxInputs || drivers.size() > kMaxInputs) {
       throw std::invalid_argument("FuseRegions: at most 16 sources and 16 drivers");
     }
@@ -167,6 +171,11 @@ class Merge {
     n_drivers_ = drivers.size();
     std::copy(sources.begin(), sources.end(), levels_[0].sources.begin());
     std::copy(drivers.begin(), drivers.end(), levels_[0].drivers.begin());
+    reference_ = reference;
+    if (reference_ != nullptr) {
+      levels_[0].lag = lag;
+      levels_[0].ref = TreeCursor(*reference_, reference_->getRoot());
+    }
     Visit(0, 0, nullptr, 0);
   }
 
@@ -175,12 +184,16 @@ class Merge {
   struct Level {
     std::array<Cursor, kMaxInputs> sources;
     std::array<Cursor, kMaxInputs> drivers;
+    Cursor lag, ref;  // with a catch-up: the lagging regions, the reference's content
   };
 
   void Visit(unsigned depth, std::uint64_t code, Node* parent, unsigned index) {
     const Level& here = levels_[depth];
-    bool covered = false;
-    for (std::size_t i = 0; i < n_drivers_; ++i) covered |= here.drivers[i].kind == Cursor::kUniform;
+    bool covered = false, driven = false;
+    for (std::size_t i = 0; i < n_drivers_; ++i) {
+      covered |= here.drivers[i].kind == Cursor::kUniform;
+      driven |= here.drivers[i].kind != Cursor::kNone;
+    }
     bool uniform = true;
     for (std::size_t i = 0; i < n_sources_; ++i) {
       uniform &= here.sources[i].kind == Cursor::kNone || here.sources[i].kind == Cursor::kUniform;
@@ -191,6 +204,10 @@ class Merge {
                                                                : nullptr);
     if (covered && uniform) {
       Write(depth, code, parent, index, node, here);
+      return;
+    }
+    if (!driven && here.lag.kind == Cursor::kUniform && here.ref.kind != Cursor::kTree) {
+      Copy(parent, index, node, here.ref);  // catching up only
       return;
     }
     // Descend: the target's node here must exist and have its children (a leaf is split, its
@@ -204,26 +221,34 @@ class Merge {
     std::array<const MapNode*, kMaxInputs> next_source, next_driver;
     for (std::size_t i = 0; i < n_sources_; ++i) next_source[i] = here.sources[i].lo;
     for (std::size_t i = 0; i < n_drivers_; ++i) next_driver[i] = here.drivers[i].lo;
+    const MapNode* next_lag = here.lag.lo;
     const std::uint64_t span = MortonSpan(depth + 1);
     for (unsigned child = 0; child < 8; ++child) {
-      bool driven = false;
+      bool child_driven = false;
       for (std::size_t i = 0; i < n_drivers_; ++i) {
         ChildCursor(here.drivers[i], nullptr, depth, code, child, &next_driver[i],
                     &below.drivers[i]);
-        driven |= below.drivers[i].kind != Cursor::kNone;
+        child_driven |= below.drivers[i].kind != Cursor::kNone;
       }
+      ChildCursor(here.lag, nullptr, depth, code, child, &next_lag, &below.lag);
+      const bool lagging = below.lag.kind != Cursor::kNone;
+      if (!child_driven && !lagging) continue;
       // Sources only where a driver leads: a tree's children are not even looked at elsewhere.
-      if (!driven) continue;
-      for (std::size_t i = 0; i < n_sources_; ++i) {
-        ChildCursor(here.sources[i], source_trees_[i], depth, code, child, &next_source[i],
-                    &below.sources[i]);
+      if (child_driven) {
+        for (std::size_t i = 0; i < n_sources_; ++i) {
+          ChildCursor(here.sources[i], source_trees_[i], depth, code, child, &next_source[i],
+                      &below.sources[i]);
+        }
       }
+      // Outside the lagging regions the target holds what the reference holds.
+      if (lagging) ChildCursor(here.ref, reference_, depth, code, child, nullptr, &below.ref);
       Visit(depth + 1, code + child * span, node, child);
     }
     Settle(parent, index, node);
   }
 
-  // The region's value from uniform sources (or nothing).
+  // The region's value from uniform sources (or nothing). Changed: against the reference where
+  // the target lags behind it, else against what the target held.
   void Write(unsigned depth, std::uint64_t code, Node* parent, unsigned index, Node* node,
              const Level& here) {
     std::array<float, kMaxInputs> v{};
@@ -231,36 +256,53 @@ class Merge {
     for (std::size_t i = 0; i < n_sources_; ++i) {
       if (here.sources[i].kind == Cursor::kUniform) v[n++] = here.sources[i].value;
     }
+    const bool lagging = here.lag.kind != Cursor::kNone;
     if (n == 0) {
-      if (node == nullptr) return;
-      if (parent == nullptr) {
-        target_.clear();
-      } else {
-        DeleteSubtree(target_, parent, index);
-      }
-      Changed(depth, code);
+      const bool had = lagging ? here.ref.kind != Cursor::kNone : node != nullptr;
+      if (node != nullptr) Remove(parent, index);
+      if (had) Changed(depth, code);
       return;
     }
-    const float value = mode_ == Mode::kCopy ? v[0] : policy_.Fuse(v.data(), n);
-    if (node != nullptr && !target_.nodeHasChildren(node) && node->getLogOdds() == value) return;
+    const float value = policy_.Fuse(v.data(), n);
+    const bool held = node != nullptr && !target_.nodeHasChildren(node) && node->getLogOdds() == value;
+    const bool same =
+        lagging ? here.ref.kind == Cursor::kUniform && here.ref.value == value : held;
+    if (!held) SetLeaf(parent, index, node, value);
+    if (!same) Changed(depth, code);
+  }
+
+  // The reference's content of a lagging region (uniform or nothing) into the target.
+  void Copy(Node* parent, unsigned index, Node* node, const Cursor& ref) {
+    if (ref.kind == Cursor::kNone) {
+      if (node != nullptr) Remove(parent, index);
+      return;
+    }
+    if (node != nullptr && !target_.nodeHasChildren(node) && node->getLogOdds() == ref.value) return;
+    SetLeaf(parent, index, node, ref.value);
+  }
+
+  void Remove(Node* parent, unsigned index) {
+    if (parent == nullptr) {
+      target_.clear();
+    } else {
+      DeleteSubtree(target_, parent, index);
+    }
+  }
+
+  void SetLeaf(Node* parent, unsigned index, Node* node, float value) {
     if (node == nullptr) {
       node = parent == nullptr ? EnsureRoot(target_) : target_.createNodeChild(parent, index);
     } else {
       MakeLeaf(target_, node);
     }
     node->setLogOdds(value);
-    Changed(depth, code);
   }
 
   // After its children: an empty node goes, eight equal leaves become one, an inner node holds
   // the maximum of its children.
   void Settle(Node* parent, unsigned index, Node* node) {
     if (!target_.nodeHasChildren(node)) {
-      if (parent == nullptr) {
-        target_.clear();
-      } else {
-        DeleteSubtree(target_, parent, index);
-      }
+      Remove(parent, index);
       return;
     }
     if (!target_.pruneNode(node)) node->updateOccupancyChildren();
@@ -271,10 +313,10 @@ class Merge {
   }
 
   octomap::OcTree& target_;
-  Mode mode_;
   const FusionPolicy& policy_;
   std::vector<const octomap::OcTree*> source_trees_;
   std::vector<MapRegion>* changed_;
+  const octomap::OcTree* reference_ = nullptr;
   std::size_t n_sources_ = 0, n_drivers_ = 0;
   std::array<Level, kTreeDepth + 2> levels_;
 };
@@ -295,12 +337,20 @@ std::vector<Cursor> Roots(const std::vector<MergeSource>& sources,
   return roots;
 }
 
+// The regions as a driver (in *grid's memory).
+Cursor RegionsCursor(const std::vector<MapRegion>& regions, RenderedGrid* grid) {
+  grid->Clear();
+  for (const MapRegion& r : regions) grid->Append({r.code, 0.0f, r.depth});
+  const auto& nodes = grid->nodes();
+  return GridCursor(nodes.data(), nodes.data() + nodes.size(), 0);
+}
+
 }  // namespace
 
 void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
                  const std::vector<MergeSource>& sources,
                  const std::vector<const RenderedGrid*>& drivers,
-                 std::vector<MapRegion>* changed) {
+                 std::vector<MapRegion>* changed, const CatchUp* catch_up) {
   std::vector<const octomap::OcTree*> trees;
   const std::vector<Cursor> roots = Roots(sources, &trees);
   std::vector<Cursor> driver_roots;
@@ -308,20 +358,20 @@ void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
     const auto& nodes = d->nodes();
     driver_roots.push_back(GridCursor(nodes.data(), nodes.data() + nodes.size(), 0));
   }
-  Merge(target, Merge::Mode::kFuse, policy, std::move(trees), changed).Run(roots, driver_roots);
+  Merge merge(target, policy, std::move(trees), changed);
+  if (catch_up == nullptr || catch_up->reference == nullptr || catch_up->regions == nullptr) {
+    merge.Run(roots, driver_roots);
+    return;
+  }
+  RenderedGrid own(target.getResolution());
+  RenderedGrid* buffer = catch_up->buffer != nullptr ? catch_up->buffer : &own;
+  merge.Run(roots, driver_roots, catch_up->reference, RegionsCursor(*catch_up->regions, buffer));
 }
 
 void CopyRegions(octomap::OcTree& target, const octomap::OcTree& source,
                  const std::vector<MapRegion>& regions, RenderedGrid* scratch) {
-  RenderedGrid own(target.getResolution());
-  RenderedGrid& driver = scratch != nullptr ? *scratch : own;
-  driver.Clear();
-  for (const MapRegion& r : regions) driver.Append({r.code, 0.0f, r.depth});
-  std::vector<const octomap::OcTree*> trees;
-  const std::vector<Cursor> roots = Roots({{&source, nullptr}}, &trees);
-  const auto& nodes = driver.nodes();
-  Merge(target, Merge::Mode::kCopy, FusionPolicy{}, std::move(trees), nullptr)
-      .Run(roots, {GridCursor(nodes.data(), nodes.data() + nodes.size(), 0)});
+  const CatchUp catch_up{&source, &regions, scratch};
+  FuseRegions(target, FusionPolicy{}, {}, {}, nullptr, &catch_up);
 }
 
 bool DeleteVoxel(octomap::OcTree& tree, const octomap::OcTreeKey& key) {

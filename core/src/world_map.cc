@@ -146,18 +146,40 @@ const WorldMap::SensorState* WorldMap::Find(const std::string& sensor_id) const 
   return it == sensors_.end() ? nullptr : it->second.get();
 }
 
-octomap::OcTree& WorldMap::Working() {
+octomap::OcTree& WorldMap::Working(CatchUp* catch_up) {
   if (working_) return *working_;
   if (spare_ && spare_.use_count() == 1) {
-    CopyRegions(*spare_, *published_, spare_lag_, &copy_driver_);
+    if (catch_up != nullptr) {
+      *catch_up = {published_.get(), &spare_lag_, &copy_driver_};  // the caller's merge does it
+    } else {
+      CopyRegions(*spare_, *published_, spare_lag_, &copy_driver_);
+      spare_lag_.clear();
+    }
     working_ = std::move(spare_);
   } else {
     if (spare_) ++tree_copies_;
     working_ = std::make_shared<octomap::OcTree>(*published_);
+    spare_lag_.clear();
   }
   spare_.reset();
-  spare_lag_.clear();
   return *working_;
+}
+
+std::size_t WorldMap::FuseIntoWorking(const std::vector<const RenderedGrid*>& drivers) {
+  CatchUp catch_up;
+  octomap::OcTree& target = Working(&catch_up);
+  const std::size_t before = pending_.size();
+  try {
+    FuseRegions(target, policy_, Sources(nullptr), drivers, &pending_, &catch_up);
+  } catch (...) {
+    // Nothing was written (the merge checks its inputs first): catch up the plain way.
+    if (catch_up.reference != nullptr) CopyRegions(target, *catch_up.reference, spare_lag_);
+    spare_lag_.clear();
+    throw;
+  }
+  spare_lag_.clear();
+  MergeRun(before);
+  return pending_.size() - before;
 }
 
 std::vector<MergeSource> WorldMap::Sources(const SensorState* except) const {
@@ -174,12 +196,10 @@ MapStatus WorldMap::ReplaceLive(const std::string& sensor_id, RenderedGrid rende
   if (s == nullptr) return MapStatus::kUnknownSensor;
   RenderedGrid old = std::move(s->live);
   s->live = std::move(rendered);
-  const std::size_t before = pending_.size();
-  FuseRegions(Working(), policy_, Sources(nullptr), {&old, &s->live}, &pending_);
-  MergeRun(before);
+  const std::size_t changed = FuseIntoWorking({&old, &s->live});
   render_scratch_.Recycle(std::move(old));
   s->counters.live_nodes = s->live.size();
-  if (stats != nullptr) stats->regions_changed = pending_.size() - before;
+  if (stats != nullptr) stats->regions_changed = changed;
   return MapStatus::kOk;
 }
 
@@ -223,9 +243,7 @@ MapStatus WorldMap::CommitLive(const std::string& sensor_id) {
     if (positive.empty()) return MapStatus::kOk;
     refuse = &positive;
   }
-  const std::size_t before = pending_.size();
-  FuseRegions(Working(), policy_, Sources(nullptr), {refuse}, &pending_);
-  MergeRun(before);
+  (void)FuseIntoWorking({refuse});
   return MapStatus::kOk;
 }
 
@@ -274,9 +292,7 @@ std::uint64_t WorldMap::ClearBox(const Eigen::AlignedBox3d& box_world) {
   CopyRegions(*committed_, octomap::OcTree(options_.resolution_m), regions);
   RenderedGrid drivers(options_.resolution_m);
   for (const MapRegion& r : regions) drivers.Append({r.code, 0.0f, r.depth});
-  const std::size_t before = pending_.size();
-  FuseRegions(Working(), policy_, Sources(nullptr), {&drivers}, &pending_);
-  MergeRun(before);
+  (void)FuseIntoWorking({&drivers});
   return voxels;
 }
 
@@ -299,9 +315,7 @@ std::uint64_t WorldMap::Forget(double elapsed_s) {
       });
   if (!forgotten.empty()) FuseRegions(*committed_, history_policy_, {}, {&forgotten});
   const RenderedGrid all = Everything(options_.resolution_m);
-  const std::size_t before = pending_.size();
-  FuseRegions(Working(), policy_, Sources(nullptr), {&all}, &pending_);
-  MergeRun(before);
+  (void)FuseIntoWorking({&all});
   return forgotten.size();
 }
 

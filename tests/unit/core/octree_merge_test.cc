@@ -294,6 +294,52 @@ TEST(CopyRegions, BringsAnOlderCopyUpToDate) {
   ExpectInvariants(copy, copy.getRoot());
 }
 
+// Catching up inside the fuse's walk gives what fusing into a copy of the tree caught up with
+// gives: the same tree, node for node, and the same changed regions, over random histories,
+// lags and drivers (with none: CopyRegions).
+TEST(FuseRegions, CatchingUpInTheSameWalkIsCopyingFirst) {
+  std::mt19937 rng(21);
+  const FusionPolicy policy = FusionPolicy::Make(FusionRule::kIndependentOpinionPool, 0.01, 0.99);
+  for (int trial = 0; trial < 12; ++trial) {
+    const RenderedGrid h = RandomGrid(rng, 0.8, {-3.0f, -1.0f, 1.5f});
+    octomap::OcTree history(0.05);
+    FuseRegions(history, FusionPolicy{}, {{nullptr, &h}}, {&h});
+    // The published tree and a spare one version behind it.
+    const RenderedGrid first = RandomGrid(rng, 0.6, {-2.0f, 0.5f});
+    octomap::OcTree published(history);
+    FuseRegions(published, policy, {{&history, nullptr}, {nullptr, &first}}, {&first});
+    const octomap::OcTree spare_before(published);
+    const RenderedGrid second = RandomGrid(rng, 0.5, {-2.0f, 0.5f, 2.5f});
+    std::vector<MapRegion> lag;
+    if (trial % 3 == 1) {
+      FuseRegions(published, policy, {}, {&second}, &lag);  // the version removed a grid's cover
+    } else {
+      FuseRegions(published, policy, {{&history, nullptr}, {nullptr, &second}}, {&second}, &lag);
+    }
+    NormaliseRegions(&lag);
+    // The next write: a live grid fused over the history where it leads (and, in some trials,
+    // where `second` does: then every lagging region is fused, none copied).
+    const RenderedGrid live = RandomGrid(rng, trial % 4 == 0 ? 0.0 : 0.6, {-4.0f, 1.0f, 3.0f});
+    const std::vector<MergeSource> sources{{&history, nullptr}, {nullptr, &live}};
+    std::vector<const RenderedGrid*> drivers{&live};
+    if (trial % 3 == 2) drivers.push_back(&second);
+    octomap::OcTree expected(published);  // the spare caught up: a deep copy, no merge
+    std::vector<MapRegion> expected_changed;
+    FuseRegions(expected, policy, sources, drivers, &expected_changed);
+    octomap::OcTree got(spare_before);
+    std::vector<MapRegion> got_changed;
+    RenderedGrid buffer(0.05);
+    const CatchUp catch_up{&published, &lag, &buffer};
+    FuseRegions(got, policy, sources, drivers, &got_changed, &catch_up);
+    EXPECT_EQ(DenseOf(got), DenseOf(expected)) << "trial " << trial;
+    EXPECT_EQ(got.size(), expected.size()) << "trial " << trial;
+    EXPECT_EQ(got.getNumLeafNodes(), expected.getNumLeafNodes()) << "trial " << trial;
+    ExpectInvariants(got, got.getRoot());
+    EXPECT_EQ(got_changed, expected_changed) << "trial " << trial;
+    if (!lag.empty()) EXPECT_NE(DenseOf(spare_before), DenseOf(published)) << "trial " << trial;
+  }
+}
+
 // The cover of a box, checked voxel by voxel with OctoMap's own key-to-centre conversion, and
 // clearing it (CopyRegions from an empty tree) leaves every other voxel as it was.
 TEST(RegionsInBox, TileExactlyTheVoxelsWhoseCentresLieInTheBox) {

@@ -37,15 +37,27 @@ struct MergeSource {
   const RenderedGrid* grid = nullptr;
 };
 
+// A tree the target lags behind in some regions (ascending codes, disjoint): FuseRegions brings
+// it up to date there in the same walk (see below). buffer (may be null): kept between calls.
+struct CatchUp {
+  const octomap::OcTree* reference = nullptr;
+  const std::vector<MapRegion>* regions = nullptr;
+  RenderedGrid* buffer = nullptr;
+};
+
 // target := policy.Fuse(opinions of the sources) in every region where some driver has a node
 // (sources without an opinion left out; none at all: the region is removed). Regions no driver
 // touches keep what they hold. Sources and target must share the resolution; the target may
 // be one of the sources. Appends the regions whose value changed (removed included) in Morton
 // order to *changed, if not null.
+// With a catch-up, the target first becomes the reference in its regions (as CopyRegions),
+// except where a driver leads, whose fused value is written directly; a region counts as
+// changed there when its value differs from the reference's. One walk instead of a copy and a
+// fuse over the same regions. The target must not be one of the sources then.
 void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
                  const std::vector<MergeSource>& sources,
                  const std::vector<const RenderedGrid*>& drivers,
-                 std::vector<MapRegion>* changed = nullptr);
+                 std::vector<MapRegion>* changed = nullptr, const CatchUp* catch_up = nullptr);
 
 // target := source in the given regions (ascending codes, disjoint): what source holds there,
 // nothing where it holds nothing. `scratch` (may be null): a buffer kept between calls.

@@ -9,10 +9,10 @@
 // version says which regions it changed (MapChanges), for the change log.
 //
 // Publication: Publish() hands out the map as an immutable octree. Two trees take turns: the
-// one published last is read by queries while the other is written; before the next write the
-// other is brought up to date by copying in the regions of the versions it missed, so no
-// version is a deep copy of the map (unless a reader still holds the tree that is due to be
-// written: then it is copied once).
+// one published last is read by queries while the other is written; the other is brought up
+// to date with the regions of the version it missed in the same walk as the next write
+// (octree_merge.h, CatchUp), so no version is a deep copy of the map (unless a reader still
+// holds the tree that is due to be written: then it is copied once).
 //
 // Two ways to drive it:
 //  - The pieces, for a pipelined caller (fusiond): integrate with its own SensorPeriods, render
@@ -237,8 +237,12 @@ class WorldMap {
   struct SensorState;
   SensorState* Find(const std::string& sensor_id);
   [[nodiscard]] const SensorState* Find(const std::string& sensor_id) const;
-  // The tree to write, brought up to date (see Publication above).
-  octomap::OcTree& Working();
+  // The tree to write, brought up to date (see Publication above); with catch_up, the spare's
+  // catching up is left to the caller's merge (*catch_up says with what, else it is empty).
+  octomap::OcTree& Working(CatchUp* catch_up = nullptr);
+  // FuseRegions(Working(), the map's policy, every source, drivers) catching up in the same
+  // walk; the changed regions go to pending_. Returns how many.
+  std::size_t FuseIntoWorking(const std::vector<const RenderedGrid*>& drivers);
   std::vector<MergeSource> Sources(const SensorState* except) const;
   // Merges the regions pending_ got from one merge (from run_begin on) into the ordered rest.
   void MergeRun(std::size_t run_begin);
