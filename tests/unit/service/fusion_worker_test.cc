@@ -37,6 +37,13 @@ Cloud WallAt(const BeamTessellation& tessellation, double range_m, std::uint64_t
   return cloud;
 }
 
+// A sensor driving sideways, 5 cm a frame (beyond the 1 cm tolerance): one period per cloud.
+Cloud Driving(const BeamTessellation& tessellation, int k) {
+  Cloud cloud = WallAt(tessellation, 2.0 + 0.1 * (k % 3), static_cast<std::uint64_t>(k + 1));
+  cloud.T_world_published = Eigen::Translation3d(0.05 * k, 0.0, 0.0) * Eigen::Isometry3d::Identity();
+  return cloud;
+}
+
 class FusionWorkerTest : public ::testing::Test {
  protected:
   void SetUp() override { StartWorker(16, 12, Options()); }
@@ -77,6 +84,18 @@ class FusionWorkerTest : public ::testing::Test {
       std::this_thread::sleep_for(5ms);
     }
     ASSERT_EQ(worker_->in_map(), seq_);
+  }
+
+  // Core's WorldMap with the sensor added and the first `clouds` clouds of Driving integrated in
+  // order on this thread (not rendered, not committed).
+  void FeedTheDrive(WorldMap* map, int clouds) const {
+    ASSERT_EQ(map->AddSensor("s", sensor_.spec), MapStatus::kOk);
+    for (int k = 0; k < clouds; ++k) {
+      const Cloud cloud = Driving(*tessellation_, k);
+      ASSERT_EQ(map->Integrate("s", cloud.T_world_published, cloud.xyz.data(),
+                               cloud.xyz.size() / 3),
+                MapStatus::kOk);
+    }
   }
 
   static const octomap::OcTreeNode* On(const octomap::OcTree& tree, double z_m) {
@@ -131,12 +150,6 @@ std::vector<std::tuple<std::size_t, unsigned, float>> Leaves(const octomap::OcTr
   return out;
 }
 
-// A sensor driving sideways, 5 cm a frame (beyond the 1 cm tolerance): one period per cloud.
-Cloud Driving(const BeamTessellation& tessellation, int k) {
-  Cloud cloud = WallAt(tessellation, 2.0 + 0.1 * (k % 3), static_cast<std::uint64_t>(k + 1));
-  cloud.T_world_published = Eigen::Translation3d(0.05 * k, 0.0, 0.0) * Eigen::Isometry3d::Identity();
-  return cloud;
-}
 
 TEST_F(FusionWorkerTest, MovingPeriodsAreCommittedInOrderEachCloudOnce) {
   WorkerOptions options = Options();
@@ -151,13 +164,7 @@ TEST_F(FusionWorkerTest, MovingPeriodsAreCommittedInOrderEachCloudOnce) {
   EXPECT_EQ(queues_.counters("s")->merged.load(), 0u);
   // Core's WorldMap fed the same clouds in order on one thread: the same map, leaf by leaf.
   WorldMap expected(options.map);
-  ASSERT_EQ(expected.AddSensor("s", sensor_.spec), MapStatus::kOk);
-  for (int k = 0; k < kClouds; ++k) {
-    const Cloud cloud = Driving(*tessellation_, k);
-    ASSERT_EQ(expected.Integrate("s", cloud.T_world_published, cloud.xyz.data(),
-                                 cloud.xyz.size() / 3),
-              MapStatus::kOk);
-  }
+  FeedTheDrive(&expected, kClouds);
   ASSERT_EQ(expected.Commit("s"), MapStatus::kOk);
   const auto published = hub_.Current();
   ASSERT_GT(expected.tree().getNumLeafNodes(), 100u);
@@ -186,13 +193,7 @@ TEST_F(FusionWorkerTest, AMovingSensorsFrameIsInTheMapBeforeTheNextOne) {
   EXPECT_EQ(worker_->renders(), static_cast<std::uint64_t>(kClouds)) << "one render a period";
   // The same map as core's WorldMap with the last period rendered but open.
   WorldMap expected(options.map);
-  ASSERT_EQ(expected.AddSensor("s", sensor_.spec), MapStatus::kOk);
-  for (int k = 0; k < kClouds; ++k) {
-    const Cloud cloud = Driving(*tessellation_, k);
-    ASSERT_EQ(expected.Integrate("s", cloud.T_world_published, cloud.xyz.data(),
-                                 cloud.xyz.size() / 3),
-              MapStatus::kOk);
-  }
+  FeedTheDrive(&expected, kClouds);
   ASSERT_EQ(expected.Render("s"), MapStatus::kOk);
   EXPECT_EQ(Leaves(*hub_.Current()->tree), Leaves(expected.tree()));
 }
