@@ -172,7 +172,8 @@ std::size_t WorldMap::FuseIntoWorking(const std::vector<const RenderedGrid*>& dr
   try {
     FuseRegions(target, policy_, Sources(nullptr), drivers, &pending_, &catch_up);
   } catch (...) {
-    // Nothing was written (the merge checks its inputs first): catch up the plain way.
+    // Too many inputs are refused before anything is written; whatever else stopped the walk,
+    // the lagging regions are brought to the published tree the plain way.
     if (catch_up.reference != nullptr) CopyRegions(target, *catch_up.reference, spare_lag_);
     spare_lag_.clear();
     throw;
