@@ -32,6 +32,19 @@ long NearestCell(double x) { return x >= 0.0 ? static_cast<long>(x + 0.5) : std:
 // Offset of sub-ray i of k across a beam, in beam widths (-0.5, 0.5).
 double SubOffset(int i, int k) { return (i + 0.5) / k - 0.5; }
 
+// One ray's occupied evidence stays only in its crossing `mode` (the one holding the most of
+// the ray's first-hit mass, reach times hazard, among those with occupied evidence); the other
+// crossings of segments[first, end) with occupied evidence get 0, as the dead band's. Eq. 8's
+// hazard tends to 1 at the far end of a wide distribution, and even weighted by reach it gave
+// a voxel holding a fifth of the mass there 0.6 to 1 log-odds, against logit(0.6) = 0.4 for the
+// voxel holding most of it: surfaces came out a voxel thick behind what the sensor saw.
+void KeepOccupiedAtMode(std::size_t first, std::size_t mode, std::vector<Segment>* segments) {
+  for (std::size_t i = first; i < segments->size(); ++i) {
+    Segment& s = (*segments)[i];
+    if (i != mode && s.evidence > 0.0f) s.evidence = 0.0f;
+  }
+}
+
 // Shift of the first-hit distribution at offset f toward the neighbour steps (`minus` at
 // f < 0, `plus` at f > 0): linear from the beam's centre to the neighbour's.
 double ShiftAt(double f, double minus, double plus) { return f >= 0.0 ? f * plus : -f * minus; }
@@ -139,6 +152,11 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
     lead = false;
   }
   const double t_in_first = t_in;
+  // The crossing holding the most of the ray's first-hit mass among those with occupied
+  // evidence: the only one that keeps it (ModeOnly below).
+  const std::size_t first_out = out->size();
+  std::size_t mode = out->size();
+  double mode_mass = 0.0;
   bool done = false;
   bool left_map = false;  // the ray left the key range: it ends at the map's edge
   while (!done) {
@@ -181,6 +199,10 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
                             : SegmentEvidence(p, prior.log_odds, remaining_mass);
       evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);
       const double length_m = bounds[j + 1] - bounds[j];
+      if (evidence > 0.0 && remaining_mass * p > mode_mass) {
+        mode_mass = remaining_mass * p;
+        mode = out->size();
+      }
       out->push_back({keys_[j], static_cast<float>(evidence),
                       static_cast<float>(length_m) * weight_scale, bounds[j + 1] + shift});
       remaining_mass *= (1.0 - p);
@@ -192,6 +214,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
     }
     if (t_in >= t_last_entry || left_map) done = true;
   }
+  KeepOccupiedAtMode(first_out, mode, out);
   return t_in;
 }
 

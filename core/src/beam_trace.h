@@ -35,7 +35,8 @@ namespace fusion::detail {
 //   stays as unknown as it was (a wide first-hit distribution's flanks).
 // - hazard above 1/2: occupied evidence logit(hazard) (against the map's unknown 1/2), times
 //   reach: behind the mass of a wide distribution Eq. 8's hazard tends to 1 while the beam
-//   hardly ever gets there, and such a crossing says next to nothing.
+//   hardly ever gets there, and such a crossing says next to nothing. Of one ray's crossings
+//   only the one holding most of its first-hit mass keeps it (BeamTracer::TraceBeam).
 [[nodiscard]] double SegmentEvidence(double hazard, double prior_log_odds, double reach);
 
 // One voxel crossing of a ray with its evidence.

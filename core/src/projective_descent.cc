@@ -363,6 +363,7 @@ inline void Descent::VisitVoxel(const std::array<int, 3>& key_min, const Box& bo
                                static_cast<octomap::key_type>(key_min[2]));
   // A voxel free in every beam it overlaps holds no traced segment.
   if (const auto traced = v.free_through ? std::nullopt : traced_.LogOddsOf(key)) {
+    if (*traced == 0.0) return;  // crossed, but left unknown (the voxel rule's dead band)
     if (saturated && *traced <= 0.0) {
       ++stats_->skipped_saturated;
     } else {

@@ -50,6 +50,7 @@ RenderedGrid RenderedGrid::FromLocalGrid(const LocalGrid& local) {
   RenderedGrid out(local.resolution_m());
   out.nodes_.reserve(local.size());
   local.ForEachLogOdds([&](const octomap::OcTreeKey& key, float l) {
+    if (l == 0.0f) return;  // crossed, but left unknown (the voxel rule's dead band)
     out.nodes_.push_back({MortonOf(key), l, static_cast<std::uint8_t>(kTreeDepth)});
   });
   std::sort(out.nodes_.begin(), out.nodes_.end(),

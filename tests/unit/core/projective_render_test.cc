@@ -99,7 +99,6 @@ bool OccupiedNear(const RenderedGrid& grid, const octomap::OcTreeKey& key) {
 
 Agreement Compare(const LocalGrid& oracle, const RenderedGrid& ours) {
   Agreement a;
-  a.oracle_voxels = oracle.size();
   a.ours_voxels = ours.VoxelCount();
   // Every occupied voxel of ours, to check the oracle around it.
   std::vector<octomap::OcTreeKey> ours_occupied;
@@ -109,6 +108,8 @@ Agreement Compare(const LocalGrid& oracle, const RenderedGrid& ours) {
     if (n.depth == kTreeDepth) ours_occupied.push_back(KeyOfMorton(n.code));
   }
   oracle.ForEachLogOdds([&](const octomap::OcTreeKey& key, float l) {
+    if (l == 0.0f) return;  // crossed but left unknown: no node in a rendered grid
+    ++a.oracle_voxels;
     const bool occupied = l > 0.0f;
     a.oracle_occupied += occupied ? 1 : 0;
     a.oracle_free += occupied ? 0 : 1;

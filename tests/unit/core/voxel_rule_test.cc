@@ -16,9 +16,11 @@ namespace {
 constexpr double kVoxelM = 0.02;
 
 // Occupancy along the optical axis (every voxel from 1 m to 3 m) after `readings` readings at
-// 2.01 m (one period) of a laser whose reading noise is sigma_m at every range.
+// reading_m (one period; default 2.01 m, a voxel's centre) of a laser whose reading noise is
+// sigma_m at every range.
 std::vector<std::optional<double>> AlongTheAxis(double sigma_m, int readings,
-                                                std::vector<double>* at_m) {
+                                                std::vector<double>* at_m,
+                                                double reading_m = 2.01) {
   WorldMapOptions options;
   options.resolution_m = kVoxelM;
   options.render.resolution_m = kVoxelM;
@@ -26,7 +28,7 @@ std::vector<std::optional<double>> AlongTheAxis(double sigma_m, int readings,
   SensorSpec laser = *SensorPreset("laser_3d");
   laser.q_sigma = {0.0, 0.0, sigma_m};
   EXPECT_EQ(map.AddSensor("laser", laser), MapStatus::kOk);
-  const float point[3] = {0.0f, 0.0f, 2.01f};  // the centre of a voxel
+  const float point[3] = {0.0f, 0.0f, static_cast<float>(reading_m)};
   for (int i = 0; i < readings; ++i) {
     EXPECT_EQ(map.Integrate("laser", Eigen::Isometry3d::Identity(), point, 1), MapStatus::kOk);
   }
@@ -98,6 +100,23 @@ TEST(VoxelRuleTest, AgreeingReadingsMakeAWideSurfaceThin) {
   EXPECT_GE(occupied, 1);
   EXPECT_LE(occupied, 3);
   ExpectClearInFrontAndNothingBehind(sigma_m, at, p);
+}
+
+// A reading 4 mm in front of a voxel boundary (2.00 m) with sigma 8 mm puts two thirds of its
+// first-hit mass in the voxel in front and a third behind. The voxel behind is where Eq. 8's
+// hazard tends to 1 (the beam that gets there stops there): before, it took more occupied
+// evidence than the voxel holding most of the mass and both came out occupied, the surface a
+// voxel thick behind the reading. Only the voxel holding most of the mass is occupied.
+TEST(VoxelRuleTest, OnlyTheVoxelHoldingMostOfTheMassIsOccupied) {
+  for (const int readings : {1, 4}) {
+    std::vector<double> at;
+    const auto p = AlongTheAxis(0.008, readings, &at, 1.996);
+    for (std::size_t i = 0; i < at.size(); ++i) {
+      const bool in_front = std::abs(at[i] - 1.99) < 1e-6;  // the voxel [1.98, 2.00)
+      EXPECT_EQ(Occupied(p[i]), in_front) << readings << " readings, at " << at[i];
+    }
+    ExpectClearInFrontAndNothingBehind(0.008, at, p);
+  }
 }
 
 }  // namespace

@@ -46,7 +46,8 @@ class RenderedGrid {
       : resolution_m_(resolution_m), nodes_(std::move(storage)) {
     nodes_.clear();
   }
-  // Every voxel of a local grid (sorted into Morton order).
+  // Every voxel of a local grid that holds evidence (sorted into Morton order); one at
+  // log-odds 0 says nothing and is left out, as the map holds no node at 0.
   [[nodiscard]] static RenderedGrid FromLocalGrid(const LocalGrid& local);
 
   [[nodiscard]] double resolution_m() const { return resolution_m_; }
