@@ -153,7 +153,7 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
   }
   const double t_in_first = t_in;
   // The crossing holding the most of the ray's first-hit mass among those with occupied
-  // evidence: the only one that keeps it (ModeOnly below).
+  // evidence: the only one that keeps it (KeepOccupiedAtMode, at the end).
   const std::size_t first_out = out->size();
   std::size_t mode = out->size();
   double mode_mass = 0.0;
