@@ -477,9 +477,10 @@ void FusionWorker::PublishLocked() {
                   publication.changes.regions.size());
     hub_->Publish(std::move(snapshot), std::move(publication.changes));
   }
-  // Counted once published: a client that sees these numbers can query what they count.
-  in_map_.store(in_map);
+  // Counted once published: a client that sees these numbers can query what they count, and
+  // finds every cloud they count in the DDS-to-queryable histogram already (observed first).
   if (options_.histograms.dds_to_queryable_seconds) ObserveQueryable();
+  in_map_.store(in_map);
 }
 
 // A lane's clouds reach the map in the order they were integrated (sealed periods before the
