@@ -36,7 +36,7 @@ namespace fusion::detail {
 // - hazard above 1/2: occupied evidence logit(hazard) (against the map's unknown 1/2), times
 //   reach: behind the mass of a wide distribution Eq. 8's hazard tends to 1 while the beam
 //   hardly ever gets there, and such a crossing says next to nothing. Of one ray's crossings
-//   only the one holding most of its first-hit mass keeps it (BeamTracer::TraceBeam).
+//   only the one holding most of its first-hit mass keeps it (BeamTracer::Trace).
 [[nodiscard]] double SegmentEvidence(double hazard, double prior_log_odds, double reach);
 
 // One voxel crossing of a ray with its evidence.
