@@ -48,6 +48,7 @@ std::unique_ptr<Period> SensorPeriods::NewPeriod() {
   std::unique_ptr<Period> p;
   if (spare_) {
     p = std::move(spare_);
+    p->grid->Reset();  // here, not in Recycle: on the integrating thread, not the renderer's
     p->frames = p->merged_frames = 0;
   } else {
     p = std::make_unique<Period>();
@@ -159,8 +160,7 @@ std::unique_ptr<Period> SensorPeriods::Seal() {
 
 void SensorPeriods::Recycle(std::unique_ptr<Period> period) {
   if (!period || spare_) return;  // one spare is enough: the rest go
-  period->grid->Reset();
-  spare_ = std::move(period);
+  spare_ = std::move(period);  // reset when it is taken (NewPeriod)
 }
 
 void SensorPeriods::Reset() {

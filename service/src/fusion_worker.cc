@@ -389,16 +389,20 @@ void FusionWorker::CommitSealed(Sealed sealed) {
   const std::string& id = lane.setup->id;
   try {
     // The map may hold this period's render already (made while it was open).
-    if (lane.live_sequence != period.sequence || lane.live_frames != period.frames) {
+    const Clock::time_point start = Clock::now();
+    const bool render = lane.live_sequence != period.sequence || lane.live_frames != period.frames;
+    if (render) {
       const SaturatedFree skip = map_->Saturation(id);
-      const Clock::time_point start = Clock::now();
+      const Clock::time_point render_start = Clock::now();
       (void)map_->ReplaceLive(
           id, Render(*period.grid, period.T_world_sensor, render_options_, nullptr, &skip,
                      &map_->render_scratch()));
-      if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(start));
+      if (auto* h = options_.histograms.render_seconds) h->Observe(SecondsSince(render_start));
       renders_.fetch_add(1);
     }
     (void)map_->CommitLive(id);
+    spdlog::debug("worker: period {} of '{}' ({} frames) committed in {:.1f} ms{}", period.sequence,
+                  id, period.frames, 1e3 * SecondsSince(start), render ? ", rendered first" : "");
   } catch (const std::exception& e) {
     spdlog::error("worker: period {} of '{}' not committed: {}", period.sequence, id, e.what());
   }
@@ -456,7 +460,13 @@ bool FusionWorker::RenderOpen(Lane& lane) {
   }
   lane.rendered_cv.notify_all();
   if (!rendered) return false;
+  const Clock::time_point replace_start = Clock::now();
   (void)map_->ReplaceLive(lane.setup->id, std::move(grid));
+  spdlog::debug("worker: period {} of '{}' ({} frames) rendered in {:.1f} ms, into the map in "
+                "{:.1f} ms",
+                sequence, lane.setup->id, frames,
+                1e3 * std::chrono::duration<double>(replace_start - start).count(),
+                1e3 * SecondsSince(replace_start));
   lane.live_sequence = sequence;
   lane.live_frames = frames;
   lane.last_open_render = start;

@@ -26,6 +26,10 @@ TEST_F(HandlerTest, GetStatsCountsTheCloudsAndDescribesTheMap) {
   EXPECT_GT(stats.map_memory_bytes(), 0u);
   EXPECT_GT(stats.sensor_memory_bytes(), 0u);
   EXPECT_EQ(stats.snapshots_failed(), 0u);
+  // The sizes GetStats reports are OctoMap's own figures for the version's tree.
+  const auto snapshot = stack_->state()->hub->Current();
+  EXPECT_EQ(snapshot->sizes().leaves, snapshot->tree->getNumLeafNodes());
+  EXPECT_EQ(snapshot->sizes().memory_bytes, snapshot->tree->memoryUsage());
 }
 
 TEST_F(HandlerTest, ListSensorsGivesTheConfiguredSensorAndItsCounters) {
