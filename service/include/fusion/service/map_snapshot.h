@@ -29,7 +29,8 @@ struct MapSnapshot {
   // The tree's leaf count and memory (OcTree::memoryUsage's figure), computed once per version
   // by the first caller, then shared: GetStats stays cheap however often it is called. One walk
   // of the whole tree: memoryUsage would count the leaves again (a client that reads GetStats
-  // at every version, as service_bench's sampler does, paid ~6 % of fusiond's CPU for the two).
+  // at every version, as service_bench's sampler does, paid 6-11 % of fusiond's samples for the
+  // two; BENCHMARKS.md).
   [[nodiscard]] const Sizes& sizes() const {
     std::call_once(sizes_once_, [this] {
       using Base = octomap::OcTreeBaseImpl<octomap::OcTreeNode, octomap::AbstractOccupancyOcTree>;
