@@ -37,25 +37,32 @@ namespace {
 using Access = octomap::OcTreeBaseImpl<detail::ChildArrayAccess, detail::ChildArrayAccess>;
 using Node = octomap::OcTreeNode;
 
-// Deletes child `i` of `parent` with its whole subtree.
-void DeleteSubtree(octomap::OcTree& tree, Node* parent, unsigned i) {
+// Leaves are counted as OcTree::getNumLeafNodes counts them: a node without children is one,
+// whether or not it still has an (empty) child array.
+
+// Deletes child `i` of `parent` with its whole subtree. Returns the leaves it held.
+std::size_t DeleteSubtree(octomap::OcTree& tree, Node* parent, unsigned i) {
   Node* node = tree.getNodeChild(parent, i);
+  std::size_t leaves = 0;
   if (Access::HasChildArray(node)) {
     for (unsigned j = 0; j < 8; ++j) {
-      if (tree.nodeChildExists(node, j)) DeleteSubtree(tree, node, j);
+      if (tree.nodeChildExists(node, j)) leaves += DeleteSubtree(tree, node, j);
     }
     Access::ReleaseEmptyChildArray(node);
   }
   tree.deleteNodeChild(parent, i);
+  return std::max<std::size_t>(leaves, 1);
 }
 
-// Deletes every child of `node`, which becomes a leaf.
-void MakeLeaf(octomap::OcTree& tree, Node* node) {
-  if (!Access::HasChildArray(node)) return;
+// Deletes every child of `node`, which becomes a leaf. Returns the leaves its children held.
+std::size_t MakeLeaf(octomap::OcTree& tree, Node* node) {
+  if (!Access::HasChildArray(node)) return 0;
+  std::size_t leaves = 0;
   for (unsigned j = 0; j < 8; ++j) {
-    if (tree.nodeChildExists(node, j)) DeleteSubtree(tree, node, j);
+    if (tree.nodeChildExists(node, j)) leaves += DeleteSubtree(tree, node, j);
   }
   Access::ReleaseEmptyChildArray(node);
+  return leaves;
 }
 
 // The root of a tree, created (a leaf, value 0) if the tree is empty. OcTree creates its root
@@ -161,6 +168,9 @@ class Merge {
         source_trees_(std::move(source_trees)),
         changed_(changed) {}
 
+  // How the target's leaf count changed (OcTree::getNumLeafNodes after less before).
+  [[nodiscard]] std::int64_t leaves_added() const { return leaves_; }
+
   // reference: null, or the tree the target catches up with in the regions `lag` holds.
   void Run(const std::vector<Cursor>& sources, const std::vector<Cursor>& drivers,
            const octomap::OcTree* reference = nullptr, const Cursor& lag = {}) {
@@ -213,9 +223,10 @@ class Merge {
     // Descend: the target's node here must exist and have its children (a leaf is split, its
     // children keeping its value).
     if (node == nullptr) {
-      node = parent == nullptr ? EnsureRoot(target_) : target_.createNodeChild(parent, index);
+      node = Create(parent, index);
     } else if (!target_.nodeHasChildren(node)) {
       target_.expandNode(node);
+      leaves_ += 7;
     }
     Level& below = levels_[depth + 1];
     std::array<const MapNode*, kMaxInputs> next_source, next_driver;
@@ -283,17 +294,31 @@ class Merge {
 
   void Remove(Node* parent, unsigned index) {
     if (parent == nullptr) {
+      leaves_ -= static_cast<std::int64_t>(target_.getNumLeafNodes());
       target_.clear();
-    } else {
-      DeleteSubtree(target_, parent, index);
+      return;
     }
+    leaves_ -= static_cast<std::int64_t>(DeleteSubtree(target_, parent, index));
+    if (!target_.nodeHasChildren(parent)) ++leaves_;  // its last child: the parent is a leaf now
+  }
+
+  // A new leaf at child `index` of `parent` (null: the root of an empty tree).
+  Node* Create(Node* parent, unsigned index) {
+    if (parent == nullptr) {
+      ++leaves_;
+      return EnsureRoot(target_);
+    }
+    if (target_.nodeHasChildren(parent)) ++leaves_;  // else the parent was the leaf
+    return target_.createNodeChild(parent, index);
   }
 
   void SetLeaf(Node* parent, unsigned index, Node* node, float value) {
     if (node == nullptr) {
-      node = parent == nullptr ? EnsureRoot(target_) : target_.createNodeChild(parent, index);
+      node = Create(parent, index);
+    } else if (target_.nodeHasChildren(node)) {
+      leaves_ += 1 - static_cast<std::int64_t>(MakeLeaf(target_, node));
     } else {
-      MakeLeaf(target_, node);
+      MakeLeaf(target_, node);  // an empty child array
     }
     node->setLogOdds(value);
   }
@@ -305,7 +330,11 @@ class Merge {
       Remove(parent, index);
       return;
     }
-    if (!target_.pruneNode(node)) node->updateOccupancyChildren();
+    if (target_.pruneNode(node)) {
+      leaves_ -= 7;
+    } else {
+      node->updateOccupancyChildren();
+    }
   }
 
   void Changed(unsigned depth, std::uint64_t code) {
@@ -318,6 +347,7 @@ class Merge {
   std::vector<MapRegion>* changed_;
   const octomap::OcTree* reference_ = nullptr;
   std::size_t n_sources_ = 0, n_drivers_ = 0;
+  std::int64_t leaves_ = 0;
   std::array<Level, kTreeDepth + 2> levels_;
 };
 
@@ -350,7 +380,8 @@ Cursor RegionsCursor(const std::vector<MapRegion>& regions, RenderedGrid* grid) 
 void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
                  const std::vector<MergeSource>& sources,
                  const std::vector<const RenderedGrid*>& drivers,
-                 std::vector<MapRegion>* changed, const CatchUp* catch_up) {
+                 std::vector<MapRegion>* changed, const CatchUp* catch_up,
+                 std::int64_t* leaves_added) {
   std::vector<const octomap::OcTree*> trees;
   const std::vector<Cursor> roots = Roots(sources, &trees);
   std::vector<Cursor> driver_roots;
@@ -361,17 +392,26 @@ void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
   Merge merge(target, policy, std::move(trees), changed);
   if (catch_up == nullptr || catch_up->reference == nullptr || catch_up->regions == nullptr) {
     merge.Run(roots, driver_roots);
-    return;
+  } else {
+    RenderedGrid own(target.getResolution());
+    RenderedGrid* buffer = catch_up->buffer != nullptr ? catch_up->buffer : &own;
+    merge.Run(roots, driver_roots, catch_up->reference, RegionsCursor(*catch_up->regions, buffer));
   }
-  RenderedGrid own(target.getResolution());
-  RenderedGrid* buffer = catch_up->buffer != nullptr ? catch_up->buffer : &own;
-  merge.Run(roots, driver_roots, catch_up->reference, RegionsCursor(*catch_up->regions, buffer));
+  if (leaves_added != nullptr) *leaves_added += merge.leaves_added();
 }
 
 void CopyRegions(octomap::OcTree& target, const octomap::OcTree& source,
-                 const std::vector<MapRegion>& regions, RenderedGrid* scratch) {
+                 const std::vector<MapRegion>& regions, RenderedGrid* scratch,
+                 std::int64_t* leaves_added) {
   const CatchUp catch_up{&source, &regions, scratch};
-  FuseRegions(target, FusionPolicy{}, {}, {}, nullptr, &catch_up);
+  FuseRegions(target, FusionPolicy{}, {}, {}, nullptr, &catch_up, leaves_added);
+}
+
+std::size_t TreeMemoryBytes(const octomap::OcTree& tree, std::size_t leaves) {
+  using Base = octomap::OcTreeBaseImpl<octomap::OcTreeNode, octomap::AbstractOccupancyOcTree>;
+  const std::size_t nodes = tree.size();
+  return sizeof(Base) + tree.memoryUsageNode() * nodes +
+         (nodes - std::min(leaves, nodes)) * sizeof(octomap::OcTreeNode* [8]);
 }
 
 bool DeleteVoxel(octomap::OcTree& tree, const octomap::OcTreeKey& key) {

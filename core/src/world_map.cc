@@ -19,6 +19,11 @@ std::unique_ptr<octomap::OcTree> NewTree(const WorldMapOptions& options) {
   return tree;
 }
 
+// count += delta (a merge's report of the leaves it added, negative when it removed some).
+void AddLeaves(std::size_t* count, std::int64_t delta) {
+  *count = static_cast<std::size_t>(static_cast<std::int64_t>(*count) + delta);
+}
+
 // A driver covering the whole key space.
 RenderedGrid Everything(double resolution_m) {
   RenderedGrid all(resolution_m);
@@ -152,13 +157,17 @@ octomap::OcTree& WorldMap::Working(CatchUp* catch_up) {
     if (catch_up != nullptr) {
       *catch_up = {published_.get(), &spare_lag_, &copy_driver_};  // the caller's merge does it
     } else {
-      CopyRegions(*spare_, *published_, spare_lag_, &copy_driver_);
+      std::int64_t added = 0;
+      CopyRegions(*spare_, *published_, spare_lag_, &copy_driver_, &added);
+      AddLeaves(&spare_leaves_, added);
       spare_lag_.clear();
     }
     working_ = std::move(spare_);
+    working_leaves_ = spare_leaves_;
   } else {
     if (spare_) ++tree_copies_;
     working_ = std::make_shared<octomap::OcTree>(*published_);
+    working_leaves_ = published_leaves_;
     spare_lag_.clear();
   }
   spare_.reset();
@@ -169,15 +178,18 @@ std::size_t WorldMap::FuseIntoWorking(const std::vector<const RenderedGrid*>& dr
   CatchUp catch_up;
   octomap::OcTree& target = Working(&catch_up);
   const std::size_t before = pending_.size();
+  std::int64_t added = 0;
   try {
-    FuseRegions(target, policy_, Sources(nullptr), drivers, &pending_, &catch_up);
+    FuseRegions(target, policy_, Sources(nullptr), drivers, &pending_, &catch_up, &added);
   } catch (...) {
     // Too many inputs are refused before anything is written; whatever else stopped the walk,
     // the lagging regions are brought to the published tree the plain way.
     if (catch_up.reference != nullptr) CopyRegions(target, *catch_up.reference, spare_lag_);
     spare_lag_.clear();
+    working_leaves_ = target.getNumLeafNodes();
     throw;
   }
+  AddLeaves(&working_leaves_, added);
   spare_lag_.clear();
   MergeRun(before);
   return pending_.size() - before;
@@ -220,8 +232,10 @@ MapStatus WorldMap::CommitLive(const std::string& sensor_id) {
   SensorState* s = Find(sensor_id);
   if (s == nullptr) return MapStatus::kUnknownSensor;
   if (s->live.empty()) return MapStatus::kOk;
+  std::int64_t added = 0;
   FuseRegions(*committed_, history_policy_, {{committed_.get(), nullptr}, {nullptr, &s->live}},
-              {&s->live});
+              {&s->live}, nullptr, nullptr, &added);
+  AddLeaves(&committed_leaves_, added);
   RenderedGrid old = std::move(s->live);
   s->live = RenderedGrid(options_.resolution_m);
   s->counters.live_nodes = 0;
@@ -251,13 +265,18 @@ MapStatus WorldMap::CommitLive(const std::string& sensor_id) {
 void WorldMap::LoadHistory(const octomap::OcTree& history) {
   Reset();
   const RenderedGrid all = Everything(options_.resolution_m);
-  FuseRegions(*committed_, history_policy_, {{&history, nullptr}}, {&all});
+  std::int64_t added = 0;
+  FuseRegions(*committed_, history_policy_, {{&history, nullptr}}, {&all}, nullptr, nullptr,
+              &added);
+  AddLeaves(&committed_leaves_, added);
   working_ = std::make_shared<octomap::OcTree>(*committed_);
+  working_leaves_ = committed_leaves_;
 }
 
 void WorldMap::Reset() {
   committed_ = NewTree(options_);
   working_ = NewTree(options_);
+  committed_leaves_ = working_leaves_ = 0;
   spare_.reset();
   spare_lag_.clear();
   pending_.clear();
@@ -290,7 +309,9 @@ std::uint64_t WorldMap::ClearBox(const Eigen::AlignedBox3d& box_world) {
       if (node != nullptr) voxels += MortonSpan(depth);
     });
   }
-  CopyRegions(*committed_, octomap::OcTree(options_.resolution_m), regions);
+  std::int64_t added = 0;
+  CopyRegions(*committed_, octomap::OcTree(options_.resolution_m), regions, nullptr, &added);
+  AddLeaves(&committed_leaves_, added);
   RenderedGrid drivers(options_.resolution_m);
   for (const MapRegion& r : regions) drivers.Append({r.code, 0.0f, r.depth});
   (void)FuseIntoWorking({&drivers});
@@ -314,7 +335,11 @@ std::uint64_t WorldMap::Forget(double elapsed_s) {
               {MortonAtDepth(MortonOf(key), depth), 0.0f, static_cast<std::uint8_t>(depth)});
         }
       });
-  if (!forgotten.empty()) FuseRegions(*committed_, history_policy_, {}, {&forgotten});
+  if (!forgotten.empty()) {
+    std::int64_t added = 0;
+    FuseRegions(*committed_, history_policy_, {}, {&forgotten}, nullptr, nullptr, &added);
+    AddLeaves(&committed_leaves_, added);
+  }
   const RenderedGrid all = Everything(options_.resolution_m);
   (void)FuseIntoWorking({&all});
   return forgotten.size();
@@ -344,9 +369,12 @@ Publication WorldMap::Publish() {
   // The tree published before becomes the spare: it lacks just this version's changes (after a
   // reset it lacks everything, and is not kept).
   spare_ = changes.reset ? nullptr : std::move(published_);
+  spare_leaves_ = published_leaves_;
   spare_lag_ = changes.reset ? std::vector<MapRegion>{} : changes.regions;
   published_ = std::move(working_);
+  published_leaves_ = working_leaves_;
   last_.tree = published_;
+  last_.leaves = published_leaves_;
   last_.changes = std::move(changes);
   return last_;
 }
@@ -457,9 +485,10 @@ std::optional<double> WorldMap::Occupancy(const Eigen::Vector3d& p_world) const 
 }
 
 std::size_t WorldMap::MemoryBytes() const {
-  std::size_t bytes = committed_->memoryUsage() + published_->memoryUsage();
-  if (working_) bytes += working_->memoryUsage();
-  if (spare_) bytes += spare_->memoryUsage();
+  std::size_t bytes = TreeMemoryBytes(*committed_, committed_leaves_) +
+                      TreeMemoryBytes(*published_, published_leaves_);
+  if (working_) bytes += TreeMemoryBytes(*working_, working_leaves_);
+  if (spare_) bytes += TreeMemoryBytes(*spare_, spare_leaves_);
   for (const auto& [id, s] : sensors_) bytes += s->live.MemoryBytes();
   return bytes + render_scratch_.MemoryBytes() + copy_driver_.MemoryBytes() +
          (pending_.capacity() + spare_lag_.capacity()) * sizeof(MapRegion);

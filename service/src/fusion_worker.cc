@@ -482,6 +482,7 @@ void FusionWorker::PublishLocked() {
     auto snapshot = std::make_shared<MapSnapshot>();
     snapshot->version = publication.changes.version;
     snapshot->tree = publication.tree;
+    snapshot->leaves = publication.leaves;
     published_version_ = snapshot->version;
     spdlog::debug("worker: published version {} ({} regions changed)", published_version_,
                   publication.changes.regions.size());

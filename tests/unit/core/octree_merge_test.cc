@@ -340,6 +340,63 @@ TEST(FuseRegions, CatchingUpInTheSameWalkIsCopyingFirst) {
   }
 }
 
+// Every merge reports how the target's leaf count changed, exactly as OctoMap counts the
+// leaves afterwards: over fusing, removing (no sources), pruning (few values: blocks collapse),
+// splitting coarse leaves, catching up in the walk, copying, and emptying the tree.
+TEST(FuseRegions, ReportsHowTheLeafCountChanged) {
+  std::mt19937 rng(31);
+  const FusionPolicy policy = FusionPolicy::Make(FusionRule::kIndependentOpinionPool, 0.01, 0.99);
+  octomap::OcTree tree(0.05), lagging(0.05);
+  std::size_t leaves = 0, lagging_leaves = 0;
+  const auto add = [](std::size_t* count, std::int64_t delta) {
+    *count = static_cast<std::size_t>(static_cast<std::int64_t>(*count) + delta);
+  };
+  for (int step = 0; step < 40; ++step) {
+    const bool few = step % 2 == 0;
+    const RenderedGrid g = RandomGrid(rng, 0.3 + 0.1 * (step % 6),
+                                      few ? std::vector<float>{-2.0f} : std::vector<float>{-2.0f, 1.0f, 3.0f});
+    std::vector<MapRegion> changed;
+    std::int64_t added = 0;
+    if (step % 5 == 3) {
+      FuseRegions(tree, policy, {}, {&g}, &changed, nullptr, &added);  // removes g's cover
+    } else if (step % 7 == 6) {
+      FuseRegions(tree, policy, {{nullptr, &g}}, {&g}, &changed, nullptr, &added);  // overwrites
+    } else {
+      FuseRegions(tree, policy, {{&tree, nullptr}, {nullptr, &g}}, {&g}, &changed, nullptr,
+                  &added);
+    }
+    add(&leaves, added);
+    ASSERT_EQ(leaves, tree.getNumLeafNodes()) << "step " << step;
+    // The lagging copy catches up every other step, alternately in a merge's walk and by a copy.
+    NormaliseRegions(&changed);
+    std::int64_t caught = 0;
+    if (step % 4 == 1) {
+      const RenderedGrid h = RandomGrid(rng, 0.5, {-1.0f, 2.0f});
+      const CatchUp catch_up{&tree, &changed, nullptr};
+      FuseRegions(lagging, policy, {{nullptr, &h}}, {&h}, nullptr, &catch_up, &caught);
+    } else {
+      CopyRegions(lagging, tree, changed, nullptr, &caught);
+    }
+    add(&lagging_leaves, caught);
+    ASSERT_EQ(lagging_leaves, lagging.getNumLeafNodes()) << "step " << step;
+    if (step % 4 == 1) {  // h's regions differ: the whole tree copied back
+      std::int64_t copied = 0;
+      CopyRegions(lagging, tree, {{0, 0}}, nullptr, &copied);
+      add(&lagging_leaves, copied);
+      ASSERT_EQ(lagging_leaves, lagging.getNumLeafNodes()) << "step " << step;
+    }
+    ASSERT_EQ(DenseOf(lagging), DenseOf(tree)) << "step " << step;
+  }
+  // Everything removed: the tree is empty and the count 0.
+  RenderedGrid all(0.05);
+  all.Append({0, 0.0f, 0});
+  std::int64_t added = 0;
+  FuseRegions(tree, policy, {}, {&all}, nullptr, nullptr, &added);
+  add(&leaves, added);
+  EXPECT_EQ(tree.getRoot(), nullptr);
+  EXPECT_EQ(leaves, 0u);
+}
+
 // The cover of a box, checked voxel by voxel with OctoMap's own key-to-centre conversion, and
 // clearing it (CopyRegions from an empty tree) leaves every other voxel as it was.
 TEST(RegionsInBox, TileExactlyTheVoxelsWhoseCentresLieInTheBox) {

@@ -60,7 +60,10 @@ class Follower {
  public:
   explicit Follower(double resolution_m) : tree_(resolution_m) {}
   void Apply(const Publication& p) {
-    if (p.changes.reset) tree_.clear();
+    if (p.changes.reset) {
+      tree_.clear();
+      leaves_ = 0;
+    }
     const std::vector<MapRegion> all{{0, 0}};
     RenderedGrid values(tree_.getResolution()), removed(tree_.getResolution());
     for (const MapRegion& region : p.changes.reset ? all : p.changes.regions) {
@@ -73,12 +76,19 @@ class Follower {
           });
     }
     // One value per piece (a copy): the policy's clamping is the map's own.
-    FuseRegions(tree_, FusionPolicy{}, {{nullptr, &values}}, {&values, &removed});
+    std::int64_t added = 0;
+    FuseRegions(tree_, FusionPolicy{}, {{nullptr, &values}}, {&values, &removed}, nullptr,
+                nullptr, &added);
+    leaves_ = static_cast<std::size_t>(static_cast<std::int64_t>(leaves_) + added);
+    // The leaf counts kept without walking: the map's of its version, the follower's own.
+    EXPECT_EQ(p.leaves, p.tree->getNumLeafNodes()) << "version " << p.changes.version;
+    EXPECT_EQ(leaves_, tree_.getNumLeafNodes()) << "version " << p.changes.version;
   }
   const octomap::OcTree& tree() const { return tree_; }
 
  private:
   octomap::OcTree tree_;
+  std::size_t leaves_ = 0;
 };
 
 class WorldMapTest : public ::testing::Test {

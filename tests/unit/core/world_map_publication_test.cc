@@ -43,6 +43,15 @@ TEST_F(WorldMapTest, AFollowerOfThePublicationsReproducesTheMapExactly) {
   ASSERT_EQ(Add(&map, "sr", pose_, Frame()), MapStatus::kOk);
   ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
   ASSERT_NO_FATAL_FAILURE(follow());
+  // A snapshot loaded as the history (a reset), then a sensor over it.
+  const octomap::OcTree loaded(follower.tree());
+  map.LoadHistory(loaded);
+  ASSERT_NO_FATAL_FAILURE(follow());
+  Eigen::Isometry3d moved = pose_;
+  moved.translation() += Eigen::Vector3d(0.3, 0.0, 0.0);
+  ASSERT_EQ(Add(&map, "sr", moved, simulator_.Capture(moved)), MapStatus::kOk);
+  ASSERT_EQ(map.Render("sr"), MapStatus::kOk);
+  ASSERT_NO_FATAL_FAILURE(follow());
 }
 
 // ClearBox forgets exactly the voxels whose centres lie in the box (the live contribution

@@ -13,6 +13,7 @@
 #include <octomap/OcTree.h>
 
 #include <Eigen/Geometry>
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -54,15 +55,24 @@ struct CatchUp {
 // except where a driver leads, whose fused value is written directly; a region counts as
 // changed there when its value differs from the reference's. One walk instead of a copy and a
 // fuse over the same regions. The target must not be one of the sources then.
+// Adds how the target's leaf count (OcTree::getNumLeafNodes) changed to *leaves_added, if not
+// null: a caller that keeps the count has it without walking the tree.
 void FuseRegions(octomap::OcTree& target, const FusionPolicy& policy,
                  const std::vector<MergeSource>& sources,
                  const std::vector<const RenderedGrid*>& drivers,
-                 std::vector<MapRegion>* changed = nullptr, const CatchUp* catch_up = nullptr);
+                 std::vector<MapRegion>* changed = nullptr, const CatchUp* catch_up = nullptr,
+                 std::int64_t* leaves_added = nullptr);
 
 // target := source in the given regions (ascending codes, disjoint): what source holds there,
 // nothing where it holds nothing. `scratch` (may be null): a buffer kept between calls.
+// leaves_added: as FuseRegions'.
 void CopyRegions(octomap::OcTree& target, const octomap::OcTree& source,
-                 const std::vector<MapRegion>& regions, RenderedGrid* scratch = nullptr);
+                 const std::vector<MapRegion>& regions, RenderedGrid* scratch = nullptr,
+                 std::int64_t* leaves_added = nullptr);
+
+// OcTree::memoryUsage()'s figure for a tree with `leaves` leaves, without the walk that
+// memoryUsage makes to count them (the node count, OcTree::size, is kept by OctoMap).
+[[nodiscard]] std::size_t TreeMemoryBytes(const octomap::OcTree& tree, std::size_t leaves);
 
 // Removes the full-depth voxel `key` from `tree` (splits a pruned node holding it); false if no
 // node holds it. Every other voxel keeps its value.

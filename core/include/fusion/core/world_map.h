@@ -137,6 +137,8 @@ struct FuseStats {
 struct Publication {
   std::shared_ptr<const octomap::OcTree> tree;  // never null
   MapChanges changes;                           // changes.version is the map's version
+  // tree->getNumLeafNodes(), kept by the merges that made the tree (no walk).
+  std::size_t leaves = 0;
 };
 
 class WorldMap {
@@ -256,6 +258,9 @@ class WorldMap {
   std::shared_ptr<octomap::OcTree> working_;    // null between Publish and the next write
   std::shared_ptr<octomap::OcTree> published_;  // never null
   std::shared_ptr<octomap::OcTree> spare_;      // the publication before, reused when free
+  // Each tree's leaf count (OcTree::getNumLeafNodes), kept from the merges' reports.
+  std::size_t committed_leaves_ = 0, working_leaves_ = 0, published_leaves_ = 0,
+              spare_leaves_ = 0;
   std::vector<MapRegion> spare_lag_;            // regions the spare lacks
   RenderedGrid copy_driver_{1.0};               // CopyRegions' buffer, kept between calls
   std::vector<MapRegion> pending_;              // changed since the last publication

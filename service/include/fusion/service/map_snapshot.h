@@ -11,40 +11,41 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
 #include "fusion/core/change_log.h"
+#include "fusion/core/octree_merge.h"
 
 namespace fusion::service {
 
 struct MapSnapshot {
   std::uint64_t version = 0;
   std::shared_ptr<const octomap::OcTree> tree;  // never null
+  // tree->getNumLeafNodes() when the publisher knows it (the worker's maps keep it: Publication);
+  // else sizes() counts them once.
+  std::optional<std::size_t> leaves;
 
   struct Sizes {
     std::size_t leaves = 0;
     std::size_t memory_bytes = 0;
   };
-  // The tree's leaf count and memory (OcTree::memoryUsage's figure), computed once per version
-  // by the first caller, then shared: GetStats stays cheap however often it is called. One walk
-  // of the whole tree: memoryUsage would count the leaves again (a client that reads GetStats
-  // at every version, as service_bench's sampler does, paid 6-11 % of fusiond's samples for the
-  // two; BENCHMARKS.md).
-  [[nodiscard]] const Sizes& sizes() const {
-    std::call_once(sizes_once_, [this] {
-      using Base = octomap::OcTreeBaseImpl<octomap::OcTreeNode, octomap::AbstractOccupancyOcTree>;
-      const std::size_t leaves = tree->getNumLeafNodes();
-      const std::size_t nodes = tree->size();
-      sizes_ = {leaves, sizeof(Base) + tree->memoryUsageNode() * nodes +
-                            (nodes - leaves) * sizeof(octomap::OcTreeNode* [8])};
-    });
-    return sizes_;
+  // The tree's leaf count and memory (OcTree::memoryUsage's figure). Without a walk of the tree
+  // when `leaves` is known: GetStats and the metrics stay cheap however often they are called
+  // (a client that read GetStats at every version, as service_bench's sampler does, paid 6-11 %
+  // of fusiond's samples for the walks; BENCHMARKS.md). Else one walk, by the first caller.
+  [[nodiscard]] Sizes sizes() const {
+    if (!leaves) {
+      std::call_once(counted_once_, [this] { counted_ = tree->getNumLeafNodes(); });
+    }
+    const std::size_t n = leaves ? *leaves : counted_;
+    return {n, TreeMemoryBytes(*tree, n)};
   }
 
  private:
-  mutable std::once_flag sizes_once_;
-  mutable Sizes sizes_;
+  mutable std::once_flag counted_once_;
+  mutable std::size_t counted_ = 0;
 };
 
 class SnapshotHub {
