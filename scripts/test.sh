@@ -9,4 +9,5 @@ ensure_packages
 build
 log "running tests"
 cd "$BUILD_DIR"
+rm -rf test-tmp && mkdir -p test-tmp  # the tests' scratch files (TEST_TMPDIR)
 ctest --output-on-failure -j "$JOBS" --timeout 300 "$@"
