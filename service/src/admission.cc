@@ -1,6 +1,7 @@
 #include "fusion/service/admission.h"
 
 #include <malloc.h>
+#include <sched.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -60,7 +61,7 @@ void QueryPool::Post(std::function<void()> task) {
 }
 
 void QueryPool::Run(int nice) {
-  (void)SetThreadNice(nice);
+  (void)SetBackgroundPriority(nice);
   for (;;) {
     std::function<void()> task;
     {
@@ -85,9 +86,43 @@ bool HeapTrimmer::MaybeTrim(std::chrono::steady_clock::time_point now) {
   return true;
 }
 
-bool SetThreadNice(int nice) {
+namespace {
+
+// The kernel's struct sched_attr, its first version (SCHED_ATTR_SIZE_VER0, 48 bytes): glibc has
+// no sched_setattr, and <linux/sched/types.h> cannot be included beside <sched.h>.
+struct SchedAttr {
+  std::uint32_t size, policy;
+  std::uint64_t flags;
+  std::int32_t nice;
+  std::uint32_t priority;
+  std::uint64_t runtime_ns, deadline_ns, period_ns;
+};
+static_assert(sizeof(SchedAttr) == 48);
+
+// The shortest time slice a fair thread may ask for (Linux 6.12 clamps to 0.1-100 ms).
+constexpr std::uint64_t kBackgroundSliceNs = 100'000;
+
+}  // namespace
+
+bool SetBackgroundPriority(int nice) {
+  const int policy = ::sched_getscheduler(0);
+  if (policy == SCHED_OTHER || policy == SCHED_BATCH) {
+    SchedAttr attr{};
+    attr.size = sizeof attr;
+    attr.policy = static_cast<std::uint32_t>(policy);
+    attr.nice = nice;
+    attr.runtime_ns = kBackgroundSliceNs;
+    if (::syscall(SYS_sched_setattr, 0, &attr, 0) == 0) return true;
+  }
+  // Refused (a seccomp filter, another policy): the nice value alone.
   const auto tid = static_cast<id_t>(::syscall(SYS_gettid));
   return ::setpriority(PRIO_PROCESS, tid, nice) == 0;
+}
+
+std::uint64_t ThisThreadSliceNs() {
+  SchedAttr attr{};
+  if (::syscall(SYS_sched_getattr, 0, &attr, sizeof attr, 0) != 0) return 0;
+  return attr.policy == SCHED_OTHER || attr.policy == SCHED_BATCH ? attr.runtime_ns : 0;
 }
 
 }  // namespace fusion::service

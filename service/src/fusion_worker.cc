@@ -58,8 +58,8 @@ double SecondsSince(Clock::time_point start) {
 
 void LowerPriority(int nice, const char* what) {
   // Queries come first: the worker's threads (and the render threads they start, which inherit
-  // this) run at a lower priority than the gRPC and DDS threads (admission.h's SetThreadNice).
-  if (nice > 0 && !SetThreadNice(nice)) {
+  // this) run at a lower priority than the gRPC and DDS threads (SetBackgroundPriority).
+  if (nice > 0 && !SetBackgroundPriority(nice)) {
     spdlog::warn("worker: could not lower the priority of the {}: {}", what, std::strerror(errno));
   }
 }

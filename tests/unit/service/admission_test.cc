@@ -74,6 +74,18 @@ TEST(AdmissionTest, ThePoolRunsEveryTaskOnItsOwnLowPriorityThreads) {
   EXPECT_EQ(NiceOfThisThread(), base) << "only the pool's threads";
 }
 
+TEST(AdmissionTest, ThePoolsThreadsAskForTheShortestSliceWhereTheKernelHasSlices) {
+  const std::uint64_t own_slice_ns = ThisThreadSliceNs();
+  if (own_slice_ns == 0) GTEST_SKIP() << "this kernel has no per-thread time slice (< 6.12)";
+  std::atomic<std::uint64_t> pool_slice_ns{0};
+  {
+    QueryPool pool(1, NiceOfThisThread() + 1);
+    pool.Post([&] { pool_slice_ns = ThisThreadSliceNs(); });
+  }
+  EXPECT_EQ(pool_slice_ns, 100'000u) << "0.1 ms: a waking query thread preempts at once";
+  EXPECT_EQ(ThisThreadSliceNs(), own_slice_ns) << "only the pool's threads";
+}
+
 TEST(AdmissionTest, ThePoolCallsItsAfterTaskHookAfterEachTaskOnceItsCapturesAreGone) {
   std::atomic<int> hooks{0};
   std::atomic<int> captures_alive_at_hook{0};
