@@ -11,7 +11,6 @@
 #include <map>
 #include <memory>
 #include <mutex>
-#include <optional>
 #include <thread>
 #include <vector>
 
@@ -23,29 +22,18 @@ namespace fusion::service {
 struct MapSnapshot {
   std::uint64_t version = 0;
   std::shared_ptr<const octomap::OcTree> tree;  // never null
-  // tree->getNumLeafNodes() when the publisher knows it (the worker's maps keep it: Publication);
-  // else sizes() counts them once.
-  std::optional<std::size_t> leaves;
+  // tree->getNumLeafNodes(), as the publisher keeps it (Publication::leaves): no walk here.
+  std::size_t leaves = 0;
 
   struct Sizes {
     std::size_t leaves = 0;
     std::size_t memory_bytes = 0;
   };
-  // The tree's leaf count and memory (OcTree::memoryUsage's figure). Without a walk of the tree
-  // when `leaves` is known: GetStats and the metrics stay cheap however often they are called
-  // (a client that read GetStats at every version, as service_bench's sampler does, paid 6-11 %
-  // of fusiond's samples for the walks; BENCHMARKS.md). Else one walk, by the first caller.
-  [[nodiscard]] Sizes sizes() const {
-    if (!leaves) {
-      std::call_once(counted_once_, [this] { counted_ = tree->getNumLeafNodes(); });
-    }
-    const std::size_t n = leaves ? *leaves : counted_;
-    return {n, TreeMemoryBytes(*tree, n)};
-  }
-
- private:
-  mutable std::once_flag counted_once_;
-  mutable std::size_t counted_ = 0;
+  // The tree's leaf count and memory (OcTree::memoryUsage's figure) without a walk of the tree:
+  // GetStats and the metrics stay cheap however often they are called (a client that read
+  // GetStats at every version, as service_bench's sampler does, paid 6-11 % of fusiond's samples
+  // for the walks; BENCHMARKS.md).
+  [[nodiscard]] Sizes sizes() const { return {leaves, TreeMemoryBytes(*tree, leaves)}; }
 };
 
 class SnapshotHub {
