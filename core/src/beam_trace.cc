@@ -430,26 +430,30 @@ std::size_t RowWorkers(std::size_t rows, unsigned threads) {
   return std::clamp<std::size_t>(n, 1, std::max<std::size_t>(1, rows / kRowsPerBlock));
 }
 
-void ForEachRowBlock(
-    std::size_t rows, std::size_t n,
-    const std::function<void(std::size_t, const std::vector<std::size_t>&)>& work) {
-  std::vector<std::vector<std::size_t>> rows_of(n);
-  for (std::size_t r = 0; r < rows; ++r) rows_of[(r / kRowsPerBlock) % n].push_back(r);
-  std::vector<std::exception_ptr> errors(n);
+void RunWorkers(std::size_t workers, const std::function<void(std::size_t)>& work) {
+  std::vector<std::exception_ptr> errors(workers);
   const auto run = [&](std::size_t t) {
     try {
-      work(t, rows_of[t]);
+      work(t);
     } catch (...) {
       errors[t] = std::current_exception();
     }
   };
   std::vector<std::thread> helpers;
-  for (std::size_t t = 1; t < n; ++t) helpers.emplace_back(run, t);
+  for (std::size_t t = 1; t < workers; ++t) helpers.emplace_back(run, t);
   run(0);
   for (std::thread& h : helpers) h.join();
   for (const auto& e : errors) {
     if (e) std::rethrow_exception(e);
   }
+}
+
+void ForEachRowBlock(
+    std::size_t rows, std::size_t n,
+    const std::function<void(std::size_t, const std::vector<std::size_t>&)>& work) {
+  std::vector<std::vector<std::size_t>> rows_of(n);
+  for (std::size_t r = 0; r < rows; ++r) rows_of[(r / kRowsPerBlock) % n].push_back(r);
+  RunWorkers(n, [&](std::size_t t) { work(t, rows_of[t]); });
 }
 
 }  // namespace fusion::detail

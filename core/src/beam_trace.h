@@ -153,6 +153,9 @@ class BeamTracer {
 // Workers for a render of `rows` beam rows with RenderOptions::threads = threads (0: one per
 // hardware thread), at most one per block of rows.
 [[nodiscard]] std::size_t RowWorkers(std::size_t rows, unsigned threads);
+// Runs work(worker) for workers 0 .. workers - 1, worker 0 on the calling thread, the others on
+// threads of their own; rethrows the first exception once all are done.
+void RunWorkers(std::size_t workers, const std::function<void(std::size_t)>& work);
 // Deals the rows to `workers` workers in blocks (so that every worker gets its share of near
 // and far beams) and runs work(worker, rows) on each, worker 0 on the calling thread; rethrows
 // the first exception.

@@ -143,7 +143,7 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
   buffers.nodes = {};
   if (s.beams_rendered > 0) {
     detail::DescendOctree(grid, T_world_sensor, options, buffers.pyramid, buffers.traced[0],
-                          t_start, global_far, skip, &buffers.descent, &out, &s);
+                          t_start, global_far, skip, workers, &buffers.descent, &out, &s);
   }
   if (stats != nullptr) *stats = s;
   return out;

@@ -170,24 +170,29 @@ void BM_RenderSr3000(benchmark::State& state) {
 BENCHMARK(BM_RenderSr3000)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // One SR-3000 frame at 5 cm, rays to the sensor's full range (target <= 10 ms).
+// Arg: render threads (RenderOptions::threads).
 void BM_RenderSr3000OneFrame5cm(benchmark::State& state) {
   const Fixture& f = SharedFixture();
-  RenderFrames(state, f.sr.spec, {f.frames[0]}, f.sr.T_world_sensor,
-               Options(0.05, fusion::RenderMethod::kProjective));
+  fusion::RenderOptions options = Options(0.05, fusion::RenderMethod::kProjective);
+  options.threads = static_cast<unsigned>(state.range(0));
+  RenderFrames(state, f.sr.spec, {f.frames[0]}, f.sr.T_world_sensor, options);
 }
-BENCHMARK(BM_RenderSr3000OneFrame5cm)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_RenderSr3000OneFrame5cm)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
 
-// One stereo frame at its full 640 x 480 pixels as beams, 2 cm (target <= 33 ms).
+// One stereo frame at its full 640 x 480 pixels as beams, 2 cm (target <= 33 ms). Arg: render
+// threads.
 void BM_RenderStocFullResolution(benchmark::State& state) {
   fusion::sim::PaperRunOptions run_options;
   run_options.stereo_cols = 640;
   run_options.stereo_rows = 480;
   const fusion::sim::SensorRun stoc = fusion::sim::PaperSensorRuns(run_options)[1];
   fusion::sim::RangeSimulator simulator(fusion::sim::PaperBoardScene(), stoc.spec, stoc.sim);
+  fusion::RenderOptions options = Options(kResolutionM, fusion::RenderMethod::kProjective);
+  options.threads = static_cast<unsigned>(state.range(0));
   RenderFrames(state, stoc.spec, {simulator.Capture(stoc.T_world_sensor)}, stoc.T_world_sensor,
-               Options(kResolutionM, fusion::RenderMethod::kProjective));
+               options);
 }
-BENCHMARK(BM_RenderStocFullResolution)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_RenderStocFullResolution)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
 
 // Re-render of the same 30-frame period into the 2 cm world map (replaces the live part).
 void BM_RenderAndFuseSr3000(benchmark::State& state) {
@@ -234,8 +239,8 @@ BENCHMARK(BM_StationaryVersusOctoMap)->Unit(benchmark::kMillisecond)->Iterations
 // Moving, per frame, ours and OctoMap's in the same run: the SR-3000 drives (a new pose every
 // frame), each frame integrated, rendered and fused (committing the frame before), against one
 // insertPointCloud per frame of the same drive (run after ours); rays to the sensor's range
-// (arg 0) or to 4 m (arg 1, the deployment's map.max_range_m), for both. Also the memory of the
-// two maps after the drive.
+// (first arg 0) or to 4 m (1, the deployment's map.max_range_m), for both; second arg: our render
+// threads (OctoMap inserts on one). Also the memory of the two maps after the drive.
 void BM_MovingVersusOctoMap(benchmark::State& state) {
   const Fixture& f = SharedFixture();
   const Drive& drive = SrDrive();
@@ -245,7 +250,9 @@ void BM_MovingVersusOctoMap(benchmark::State& state) {
   std::size_t ours_bytes = 0, octomap_bytes = 0;
   fusion::RenderStats render;  // summed over the frames after the first
   for (auto _ : state) {
-    fusion::WorldMap map(MapOptions(max_range_m));
+    fusion::WorldMapOptions options = MapOptions(max_range_m);
+    options.render.threads = static_cast<unsigned>(state.range(1));
+    fusion::WorldMap map(options);
     (void)map.AddSensor("sr", f.sr.spec);
     octomap::OcTree tree(kResolutionM);
     ours_ms = integrate_ms = octomap_ms = 0.0;
@@ -290,7 +297,12 @@ void BM_MovingVersusOctoMap(benchmark::State& state) {
   state.counters["ours_map_MB"] = static_cast<double>(ours_bytes) / 1e6;
   state.counters["octomap_MB"] = static_cast<double>(octomap_bytes) / 1e6;
 }
-BENCHMARK(BM_MovingVersusOctoMap)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->Iterations(1);
+BENCHMARK(BM_MovingVersusOctoMap)
+    ->Args({0, 1})
+    ->Args({1, 1})
+    ->Args({0, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
 
 // Hough planes on the stationary map.
 void BM_HoughPlanes(benchmark::State& state) {

@@ -260,6 +260,45 @@ TEST(ProjectivePyramid, FreeBlocksLieInFrontOfEveryBeamsMass) {
   }
 }
 
+// A render on several threads (the profiles, the traces and the octree's blocks shared out)
+// gives the nodes one thread gives, in the same order, and the same counts.
+TEST(ProjectiveThreads, GiveTheNodesOneThreadGives) {
+  for (const std::string preset : {"sr3000", "stoc"}) {
+    const sim::SensorRun run = PaperRun(preset);
+    for (const double resolution_m : {0.02, 0.05}) {
+      for (int pose = 0; pose < 2; ++pose) {
+        SCOPED_TRACE(preset + " " + std::to_string(resolution_m) + " pose " +
+                     std::to_string(pose));
+        const Eigen::Isometry3d T = PoseAt(run, pose);
+        const BeamGrid grid = GridAt(run, T, 1 + 4 * pose, 11);
+        RenderOptions options;
+        options.resolution_m = resolution_m;
+        RenderStats one_stats;
+        const RenderedGrid one = RenderProjective(grid, T, options, &one_stats);
+        ASSERT_GT(one_stats.coarse_nodes + one_stats.fine_voxels, 1000u);
+        RenderScratch scratch;
+        for (const unsigned threads : {2u, 3u, 2u}) {
+          options.threads = threads;
+          RenderStats many_stats;
+          RenderedGrid many = RenderProjective(grid, T, options, &many_stats, nullptr, &scratch);
+          ASSERT_EQ(many.size(), one.size()) << threads << " threads";
+          for (std::size_t i = 0; i < one.size(); ++i) {
+            const MapNode& a = one.nodes()[i];
+            const MapNode& b = many.nodes()[i];
+            ASSERT_TRUE(a.code == b.code && a.depth == b.depth && a.log_odds == b.log_odds)
+                << threads << " threads, node " << i;
+          }
+          EXPECT_EQ(many_stats.coarse_nodes, one_stats.coarse_nodes);
+          EXPECT_EQ(many_stats.fine_voxels, one_stats.fine_voxels);
+          EXPECT_EQ(many_stats.voxels, one_stats.voxels);
+          EXPECT_EQ(many_stats.segments, one_stats.segments);
+          scratch.Recycle(std::move(many));
+        }
+      }
+    }
+  }
+}
+
 // Renders through one scratch (as the map makes them) give what fresh renders give, node for
 // node, whatever the renders before it were: other sensors, poses, resolutions and threads.
 TEST(RenderScratchTest, ReusedBuffersChangeNothing) {

@@ -172,10 +172,15 @@ TEST_F(WorldMapTest, CoarseFreeNodesAnswerFreeAndSplitForANewSurface) {
 // Leaving out free space the history holds at the free clamp changes nothing (Eq. 16): a
 // moving sensor mapped with the facade (which passes WorldMap::Saturation to every render)
 // gives exactly the map rendered without it.
+// The same with the renders on two threads (the octree's blocks shared out, each thread
+// checking the history and the live contributions on its own).
 TEST_F(WorldMapTest, LeavingOutSaturatedFreeSpaceGivesTheSameMap) {
-  WorldMap with(options_), without(options_);
+  WorldMapOptions threaded_options = options_;
+  threaded_options.render.threads = 2;
+  WorldMap with(options_), without(options_), threaded(threaded_options);
   ASSERT_EQ(with.AddSensor("sr", spec_), MapStatus::kOk);
   ASSERT_EQ(without.AddSensor("sr", spec_), MapStatus::kOk);
+  ASSERT_EQ(threaded.AddSensor("sr", spec_), MapStatus::kOk);
   SensorPeriods periods(spec_, SensorGridOptions(options_), options_.pose_tolerance_m,
                         options_.pose_tolerance_rad);
   std::size_t skipped = 0;
@@ -187,6 +192,11 @@ TEST_F(WorldMapTest, LeavingOutSaturatedFreeSpaceGivesTheSameMap) {
     FuseStats stats;
     ASSERT_EQ(with.Render("sr", &stats), MapStatus::kOk);
     skipped += stats.render.skipped_saturated;
+    ASSERT_EQ(Add(&threaded, "sr", T, cloud), MapStatus::kOk);
+    FuseStats threaded_stats;
+    ASSERT_EQ(threaded.Render("sr", &threaded_stats), MapStatus::kOk);
+    EXPECT_EQ(threaded_stats.render.skipped_saturated, stats.render.skipped_saturated);
+    ExpectSameLeaves(with.tree(), threaded.tree());
     // The same frame by hand, one period per frame, rendered without the hint.
     std::unique_ptr<Period> sealed;
     PeriodIntegration result;

@@ -135,12 +135,13 @@ inline int BeamTessellation::Edges::InnerBelow(double v) const {
   return count;
 }
 
-inline int BeamTessellation::ColumnOfTangent(double tan_azimuth) const {
+// Always inlined: the projective render's descent calls these for every block it visits.
+[[gnu::always_inline]] inline int BeamTessellation::ColumnOfTangent(double tan_azimuth) const {
   const double v = std::clamp(tan_azimuth, tan_col_edges_.lo(), tan_col_edges_.hi());
   return tan_col_edges_.InnerAtOrBelow(v);
 }
 
-inline int BeamTessellation::RowOfTangent(double tan_elevation) const {
+[[gnu::always_inline]] inline int BeamTessellation::RowOfTangent(double tan_elevation) const {
   const double v = std::clamp(tan_elevation, tan_row_edges_.lo(), tan_row_edges_.hi());
   return (rows_ - 1) - tan_row_edges_.InnerBelow(v);
 }
