@@ -105,6 +105,20 @@ const float* SensorPeriods::InsideMapOnly(const Eigen::Isometry3d& T_world_frame
   return inside_.data();
 }
 
+const float* SensorPeriods::IntoOpenFrame(const Eigen::Isometry3d& T_world_cloud,
+                                          const float* points, std::size_t point_count) {
+  // NaN stays NaN (no return), and so does every count; a "missing" (0, 0, 0) point stays so.
+  const Eigen::Isometry3d T_open_cloud = open_->T_world_sensor.inverse() * T_world_cloud;
+  moved_.resize(3 * point_count);
+  for (std::size_t k = 0; k < point_count; ++k) {
+    const Eigen::Vector3d p(points[3 * k], points[3 * k + 1], points[3 * k + 2]);
+    const Eigen::Vector3d q = T_open_cloud * p;
+    const bool zero = p.x() == 0.0 && p.y() == 0.0 && p.z() == 0.0;
+    for (int a = 0; a < 3; ++a) moved_[3 * k + a] = zero ? 0.0f : static_cast<float>(q[a]);
+  }
+  return moved_.data();
+}
+
 MapStatus SensorPeriods::Integrate(const Eigen::Isometry3d& T_world_sensor,
                                    const float* points_xyz, std::size_t point_count,
                                    const std::vector<std::uint8_t>& beyond_range, bool may_seal,
@@ -118,28 +132,22 @@ MapStatus SensorPeriods::Integrate(const Eigen::Isometry3d& T_world_sensor,
     return MapStatus::kOutsideMap;
   }
   PeriodIntegration out;
-  const float* points = points_xyz;
   if (open_->frames > 0 && Moved(T_world_sensor)) {
     if (may_seal) {
       std::unique_ptr<Period> next = NewPeriod();
       *sealed = std::move(open_);
       open_ = std::move(next);
     } else {
-      // Into the open period's frame; NaN stays NaN (no return), so does every count.
-      const Eigen::Isometry3d T_open_cloud = open_->T_world_sensor.inverse() * T_world_sensor;
-      moved_.resize(3 * point_count);
-      for (std::size_t k = 0; k < point_count; ++k) {
-        const Eigen::Vector3d p(points_xyz[3 * k], points_xyz[3 * k + 1], points_xyz[3 * k + 2]);
-        const Eigen::Vector3d q = T_open_cloud * p;
-        const bool zero = p.x() == 0.0 && p.y() == 0.0 && p.z() == 0.0;  // "missing" stays so
-        for (int a = 0; a < 3; ++a) moved_[3 * k + a] = zero ? 0.0f : static_cast<float>(q[a]);
-      }
-      points = moved_.data();
       out.merged = true;
       ++open_->merged_frames;
     }
   }
   if (open_->frames == 0) open_->T_world_sensor = T_world_sensor;
+  // A cloud taken anywhere but at the period's pose (within the tolerance, or merged) goes in
+  // with its points where they were measured: only its rays' origin is approximated.
+  const float* points = T_world_sensor.matrix() == open_->T_world_sensor.matrix()
+                            ? points_xyz
+                            : IntoOpenFrame(T_world_sensor, points_xyz, point_count);
   std::size_t outside = 0;
   points = InsideMapOnly(open_->T_world_sensor, points, point_count, beyond_range, &outside);
   out.stats = open_->grid->Integrate(points, point_count, beyond_range);

@@ -1,11 +1,13 @@
 // The integration side of a sensor's map life cycle (DESIGN.md, "Map life cycle"): clouds
 // accumulate in the beam grid of the sensor's open period while its pose stays within a
 // tolerance of the pose the period started at; a cloud from beyond it seals the period (which
-// is then rendered and committed into the map) and opens a new one at its own pose.
+// is then rendered and committed into the map) and opens a new one at its own pose. A cloud
+// taken within the tolerance, but not at the period's pose, has its points moved into the
+// period's sensor frame (T_period^-1 T_cloud): it is mapped where it was measured, and only
+// its rays' origin is approximated.
 //
 // A caller that cannot render as fast as periods are sealed may refuse to seal: the cloud is
-// then merged into the open period, its points moved into the period's sensor frame
-// (T_period^-1 T_cloud), so no evidence is thrown away; only the rays' origin is approximated.
+// then merged into the open period the same way, so no evidence is thrown away.
 //
 // Thread-compatible: one thread integrates; a sealed period is handed over whole.
 #pragma once
@@ -86,6 +88,9 @@ class SensorPeriods {
   const float* InsideMapOnly(const Eigen::Isometry3d& T_world_frame, const float* points,
                              std::size_t point_count, const std::vector<std::uint8_t>& beyond_range,
                              std::size_t* outside);
+  // `points` (taken at T_world_cloud) in the open period's sensor frame, in moved_.
+  const float* IntoOpenFrame(const Eigen::Isometry3d& T_world_cloud, const float* points,
+                             std::size_t point_count);
   std::unique_ptr<Period> NewPeriod();
 
   SensorSpec spec_;
@@ -96,7 +101,7 @@ class SensorPeriods {
   std::unique_ptr<Period> spare_;  // a recycled period, grid reset
   std::uint64_t sequence_ = 0;
   double map_resolution_m_;
-  std::vector<float> moved_;   // points of a merged cloud in the open period's frame
+  std::vector<float> moved_;   // points of a cloud in the open period's frame (IntoOpenFrame)
   std::vector<float> inside_;  // points without those outside the map
 };
 
