@@ -222,9 +222,9 @@ TEST_F(WorldMapTest, ACloudWithinTheToleranceIsMappedWhereItWasTaken) {
   ASSERT_EQ(Add(&own, "sr", turned, cloud), MapStatus::kOk);
   ASSERT_EQ(own.Render("sr"), MapStatus::kOk);
   ASSERT_GT(own.tree().getNumLeafNodes(), 100u);
-  // Every voxel the period maps lies within a voxel of one the cloud's own pose maps (mapped at
-  // the period's pose as taken, ~1.2 % lie farther: 0.988); the beams re-binned from the turned
-  // frame lose a few of the other way round (0.993).
+  // Every voxel the period maps lies within a voxel of one the cloud's own pose maps (binned as
+  // if taken at the period's pose, the old way, 1.2 % lie farther: 0.988); the beams re-binned
+  // from the turned frame lose a few the other way round (0.993).
   EXPECT_GE(OccupiedNear(via_period.tree(), own.tree()), 0.998);
   EXPECT_GE(OccupiedNear(own.tree(), via_period.tree()), 0.98);
 }
