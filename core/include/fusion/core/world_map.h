@@ -50,7 +50,7 @@ namespace fusion {
 struct WorldMapOptions {
   static constexpr double kDefaultResolutionM = RenderOptions::kDefaultResolutionM;
   static constexpr FusionRule kDefaultRule = FusionRule::kIndependentOpinionPool;
-  static constexpr double kDefaultPoseToleranceM = 0.01;
+  static constexpr double kDefaultPoseToleranceM = 0.02;
   static constexpr double kDefaultPoseToleranceDeg = 1.0;
   static constexpr double kDefaultPoseToleranceRad =
       kDefaultPoseToleranceDeg * 3.14159265358979323846 / 180.0;
