@@ -108,17 +108,18 @@ struct MovingDrive {
   int frames = 30;
 };
 
-// A moving SR-3000, one cloud per pose, against the labels of every pose's noise-free rays. Our
-// rows differ in how the frames share beam grids (the pose tolerance: frames within it of a
-// period's first pose share its grid, their points moved into its frame) and in the render.
-void PrintMovingRows(const fusion::sim::Scene& scene, const fusion::sim::SensorRun& run,
-                     const MovingDrive& drive, double resolution_m) {
-  constexpr double kFrameRateHz = 30.0;
-  const int frames = drive.frames;
-  fusion::sim::RangeSimulator simulator(scene, run.spec, run.sim);
-  std::vector<fusion::sim::SensorRun> poses;  // one labelling view per frame
+// The drive's poses (each a one-frame run, to label from) and one simulated cloud at each.
+struct DriveFrames {
+  std::vector<fusion::sim::SensorRun> poses;
   std::vector<fusion::sim::OrganizedCloud> clouds;
-  for (int k = 0; k < frames; ++k) {
+};
+
+DriveFrames SimulateDrive(const fusion::sim::Scene& scene, const fusion::sim::SensorRun& run,
+                          const MovingDrive& drive) {
+  constexpr double kFrameRateHz = 30.0;
+  fusion::sim::RangeSimulator simulator(scene, run.spec, run.sim);
+  DriveFrames out;
+  for (int k = 0; k < drive.frames; ++k) {
     const double t_s = k / kFrameRateHz;
     fusion::sim::SensorRun at = run;
     at.T_world_sensor.translation() += drive.velocity_mps * t_s;
@@ -126,18 +127,31 @@ void PrintMovingRows(const fusion::sim::Scene& scene, const fusion::sim::SensorR
         Eigen::AngleAxisd(drive.yaw_rate_degps * t_s * M_PI / 180.0, Eigen::Vector3d::UnitZ())
             .toRotationMatrix() *
         run.T_world_sensor.linear();
-    poses.push_back(at);
-    clouds.push_back(simulator.Capture(at.T_world_sensor));
+    out.poses.push_back(at);
+    out.clouds.push_back(simulator.Capture(at.T_world_sensor));
   }
+  return out;
+}
+
+// A way of mapping a drive: how the frames share beam grids (the pose tolerance: frames within
+// it of a period's first pose share its grid, their points moved into its frame) and the render.
+struct MovingVariant {
+  std::string name;
+  double tolerance_m, tolerance_deg;
+  fusion::RenderMethod method;
+};
+
+// A moving SR-3000, one cloud per pose, against the labels of every pose's noise-free rays: our
+// map in each MovingVariant, then OctoMap's.
+void PrintMovingRows(const fusion::sim::Scene& scene, const fusion::sim::SensorRun& run,
+                     const MovingDrive& drive, double resolution_m) {
+  const DriveFrames d = SimulateDrive(scene, run, drive);
+  const std::vector<fusion::sim::SensorRun>& poses = d.poses;
+  const std::vector<fusion::sim::OrganizedCloud>& clouds = d.clouds;
   const fusion::VoxelLabels labels =
       fusion::sim::LabelVoxels(scene, fusion::sim::ViewsOf(poses), resolution_m);
   const auto distance = fusion::sim::SurfaceDistance(scene);
   const std::string& name = drive.name;
-  struct MovingVariant {
-    std::string name;
-    double tolerance_m, tolerance_deg;
-    fusion::RenderMethod method;
-  };
   const double default_deg = fusion::WorldMapOptions::kDefaultPoseToleranceDeg;
   const double default_m = fusion::WorldMapOptions::kDefaultPoseToleranceM;
   const std::vector<MovingVariant> variants = {
