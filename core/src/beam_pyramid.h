@@ -43,6 +43,15 @@ static_assert(offsetof(Aggregate, min_free_end) == 0 && offsetof(Aggregate, max_
                   offsetof(Aggregate, max_far) == 8 && offsetof(Aggregate, max_free_value) == 12,
               "Aggregate::Add reads its four floats as one vector");
 
+// Columns [col_lo, col_hi] and rows [row_lo, row_hi] of a beam grid (inclusive).
+struct BeamExtent {
+  int col_lo = 0, col_hi = -1, row_lo = 0, row_hi = -1;
+  [[nodiscard]] bool empty() const { return col_hi < col_lo || row_hi < row_lo; }
+  [[nodiscard]] bool Holds(int col, int row) const {
+    return col >= col_lo && col <= col_hi && row >= row_lo && row <= row_hi;
+  }
+};
+
 // Min / max images of the beam grid, halved level by level: a rectangle of beams is answered
 // from at most 5 x 5 cells of the level where its larger side spans four cells.
 class BeamPyramid {
@@ -87,6 +96,12 @@ class BeamPyramid {
     levels_.resize(l + 1);
   }
 
+  // The smallest rectangle holding every touched beam (empty: none is). Beyond it no ray runs:
+  // the render's field of view ends there, and the beams there are left out of the counts
+  // (Aggregate::beams 0), so that a block near its edge is not held undecided by pyramid cells
+  // reaching past it (a sensor period's grid reaches past the sensor's own, SensorPeriods).
+  void SetTouchedExtent(const BeamExtent& extent) { extent_ = extent; }
+  [[nodiscard]] const BeamExtent& touched_extent() const { return extent_; }
   [[nodiscard]] std::size_t MemoryBytes() const {
     std::size_t bytes = 0;
     for (const Level& level : levels_) bytes += level.cells.capacity() * sizeof(Aggregate);
@@ -123,6 +138,7 @@ class BeamPyramid {
     std::vector<Aggregate> cells;
   };
   std::vector<Level> levels_;
+  BeamExtent extent_;
 };
 
 }  // namespace fusion::detail

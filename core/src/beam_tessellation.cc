@@ -174,24 +174,30 @@ double BeamTessellation::RowCentreTangent(int row) const {
 }
 
 BeamTessellation::TangentBounds BeamTessellation::InsetTangents(double beams) const {
+  return InsetTangents(beams, 0, cols_ - 1, 0, rows_ - 1);
+}
+
+BeamTessellation::TangentBounds BeamTessellation::InsetTangents(double beams, int col_lo,
+                                                                int col_hi, int row_lo,
+                                                                int row_hi) const {
+  // Row edges are kept bottom to top: row r's top edge is edge rows - r.
+  const double left = tan_col_edges_.at(col_lo), right = tan_col_edges_.at(col_hi + 1);
+  const double bottom = tan_row_edges_.at(rows_ - row_hi - 1), top = tan_row_edges_.at(rows_ - row_lo);
   if (pinhole_) {
     // On the image plane a beam is stride pixels wide (the last one maybe fewer: at 0.5 the
     // bounds are still its centre line, as the render's outermost rays run there).
     const PinholeIntrinsics& k = *pinhole_;
-    const PixelSpan right = SpanOf(cols_ - 1, k.width_px);
-    const PixelSpan bottom = SpanOf(rows_ - 1, k.height_px);
-    const double w_left = std::min<double>(k.stride, k.width_px), w_right = right.width;
-    const double h_top = std::min<double>(k.stride, k.height_px), h_bottom = bottom.width;
-    return {tan_col_edges_.lo() + beams * w_left / k.fx_px,
-            tan_col_edges_.hi() - beams * w_right / k.fx_px,
-            tan_row_edges_.lo() + beams * h_bottom / k.fy_px,
-            tan_row_edges_.hi() - beams * h_top / k.fy_px};
+    const double w_left = SpanOf(col_lo, k.width_px).width;
+    const double w_right = SpanOf(col_hi, k.width_px).width;
+    const double h_top = SpanOf(row_lo, k.height_px).width;
+    const double h_bottom = SpanOf(row_hi, k.height_px).width;
+    return {left + beams * w_left / k.fx_px, right - beams * w_right / k.fx_px,
+            bottom + beams * h_bottom / k.fy_px, top - beams * h_top / k.fy_px};
   }
   const double w = beams * beam_width_h_rad();
   const double h = beams * beam_width_v_rad();
-  return {std::tan(std::atan(tan_col_edges_.lo()) + w), std::tan(std::atan(tan_col_edges_.hi()) - w),
-          std::tan(std::atan(tan_row_edges_.lo()) + h),
-          std::tan(std::atan(tan_row_edges_.hi()) - h)};
+  return {std::tan(std::atan(left) + w), std::tan(std::atan(right) - w),
+          std::tan(std::atan(bottom) + h), std::tan(std::atan(top) - h)};
 }
 
 Eigen::Vector3d BeamTessellation::Direction(std::size_t beam) const {

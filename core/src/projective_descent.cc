@@ -358,7 +358,11 @@ inline bool Descent::HoldsTracedOccupied(const std::array<int, 3>& key_min, unsi
 }
 
 inline Descent::TanBounds Descent::Bounds(double inset) const {
-  const BeamTessellation::TangentBounds b = tess_.InsetTangents(inset);
+  // The field of view ends where the touched beams do (BeamPyramid::touched_extent).
+  const BeamExtent& e = pyramid_.touched_extent();
+  const BeamTessellation::TangentBounds b =
+      e.empty() ? tess_.InsetTangents(inset)
+                : tess_.InsetTangents(inset, e.col_lo, e.col_hi, e.row_lo, e.row_hi);
   return {b.az_min, b.az_max, b.el_min, b.el_max};
 }
 

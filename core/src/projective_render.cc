@@ -47,13 +47,42 @@ Aggregate TraceBeamMass(std::size_t beam, const BeamProfile& profile, float clam
   return a;
 }
 
+// The rectangle of beams holding every touched one, found from the grid's edges inwards.
+detail::BeamExtent TouchedExtent(const BeamGrid& grid) {
+  const BeamTessellation& tess = grid.tessellation();
+  const int cols = tess.cols(), rows = tess.rows();
+  const auto touched = [&](int c, int r) {
+    return grid.Touched(static_cast<std::size_t>(r) * static_cast<std::size_t>(cols) +
+                        static_cast<std::size_t>(c));
+  };
+  detail::BeamExtent e{0, cols - 1, 0, rows - 1};
+  const auto row_touched = [&](int r) {
+    for (int c = 0; c < cols; ++c) {
+      if (touched(c, r)) return true;
+    }
+    return false;
+  };
+  while (e.row_lo < rows && !row_touched(e.row_lo)) ++e.row_lo;
+  if (e.row_lo == rows) return {};
+  while (!row_touched(e.row_hi)) --e.row_hi;
+  const auto column_touched = [&](int c) {
+    for (int r = e.row_lo; r <= e.row_hi; ++r) {
+      if (touched(c, r)) return true;
+    }
+    return false;
+  };
+  while (!column_touched(e.col_lo)) ++e.col_lo;
+  while (!column_touched(e.col_hi)) --e.col_hi;
+  return e;
+}
+
 // Every beam's rays through its first-hit mass, rows dealt to `workers` threads, each into its
 // own grid of *traced (merged into (*traced)[0] at the end; their memory reused); (*beams)[b]
 // becomes beam b's Aggregate. Returns the counters of that work.
 RenderStats TraceMasses(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                         const RenderOptions& options, const std::vector<BeamProfile>& profiles,
-                        std::size_t workers, std::vector<LocalGrid>* traced,
-                        std::vector<Aggregate>* beams) {
+                        std::size_t workers, const detail::BeamExtent& extent,
+                        std::vector<LocalGrid>* traced, std::vector<Aggregate>* beams) {
   const auto rows = static_cast<std::size_t>(grid.tessellation().rows());
   const auto cols = static_cast<std::size_t>(grid.tessellation().cols());
   std::vector<LocalGrid>& parts = *traced;
@@ -76,7 +105,8 @@ RenderStats TraceMasses(const BeamGrid& grid, const Eigen::Isometry3d& T_world_s
     for (const std::size_t row : mine) {
       for (std::size_t b = row * cols; b < (row + 1) * cols; ++b) {
         if (!grid.Touched(b)) {
-          (*beams)[b].beams = 1;
+          const int col = static_cast<int>(b - row * cols);
+          (*beams)[b].beams = extent.Holds(col, static_cast<int>(row)) ? 1 : 0;
           ++s.beams_untouched;
           continue;
         }
@@ -134,7 +164,9 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
   // neighbours' surfaces), then its rays traced through the mass.
   detail::ProfileBeams(grid, options, t_start, workers, &buffers.profiles);
   std::vector<Aggregate>& beams = buffers.pyramid.Beams(tess.cols(), tess.rows());
-  RenderStats s = TraceMasses(grid, T_world_sensor, options, buffers.profiles, workers,
+  const detail::BeamExtent extent = TouchedExtent(grid);
+  buffers.pyramid.SetTouchedExtent(extent);
+  RenderStats s = TraceMasses(grid, T_world_sensor, options, buffers.profiles, workers, extent,
                               &buffers.traced, &beams);
   float global_far = -std::numeric_limits<float>::infinity();
   for (const Aggregate& a : beams) global_far = std::max(global_far, a.max_far);

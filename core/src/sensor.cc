@@ -137,6 +137,72 @@ void SetAngularLimits(double azimuth_min_rad, double azimuth_max_rad, double ele
   spec->elevation_centre_rad = 0.5 * (elevation_min_rad + elevation_max_rad);
 }
 
+namespace {
+
+// The widest a grown field of view may reach from the optical axis (tangent tables need less
+// than 90 degrees), and the most beams an axis grows by on each side (half its own).
+constexpr double kMaxGrownRad = 85.0 * kPi / 180.0;
+
+// Beams of `width_rad` to add on each side of [lo_rad, hi_rad] (of `beams` beams) for
+// `margin_rad` more.
+int AngularMargin(double lo_rad, double hi_rad, double width_rad, int beams, double margin_rad) {
+  const double room = kMaxGrownRad - std::max(std::abs(lo_rad), std::abs(hi_rad));
+  if (!(room > 0.0)) return 0;
+  const int wanted = static_cast<int>(std::ceil(std::min(margin_rad, room) / width_rad));
+  const int fits = static_cast<int>(std::floor(room / width_rad));
+  return std::min({wanted, fits, beams / 2});
+}
+
+// Pixels to add beyond an image edge whose tangent (pointing outwards) is `edge_tan`.
+double PixelMargin(double edge_tan, double focal_px, double margin_rad) {
+  const double grown = std::min(std::atan(edge_tan) + margin_rad, kMaxGrownRad);
+  return std::max(0.0, (std::tan(grown) - edge_tan) * focal_px);
+}
+
+// Strides of pixels to add on both sides of an image axis (edges at -0.5 and size - 0.5).
+int PinholeMargin(double centre_px, int size_px, double focal_px, int stride, double margin_rad) {
+  const double low = PixelMargin((centre_px + 0.5) / focal_px, focal_px, margin_rad);
+  const double high = PixelMargin((size_px - 0.5 - centre_px) / focal_px, focal_px, margin_rad);
+  const int beams = (size_px + stride - 1) / stride;
+  return std::min(static_cast<int>(std::ceil(std::max(low, high) / stride)), beams / 2);
+}
+
+}  // namespace
+
+SensorSpec WidenedFieldOfView(const SensorSpec& spec, double margin_rad, BeamMargin* margin) {
+  *margin = BeamMargin{};
+  SensorSpec out = spec;
+  if (!(margin_rad > 0.0) || !std::isfinite(margin_rad)) return out;
+  if (spec.pinhole) {
+    PinholeIntrinsics k = *spec.pinhole;
+    const int s = std::max(1, k.stride);
+    margin->cols = PinholeMargin(k.cx_px, k.width_px, k.fx_px, s, margin_rad);
+    margin->rows = PinholeMargin(k.cy_px, k.height_px, k.fy_px, s, margin_rad);
+    k.width_px += 2 * margin->cols * s;
+    k.cx_px += margin->cols * s;
+    k.height_px += 2 * margin->rows * s;
+    k.cy_px += margin->rows * s;
+    SetPinhole(k, &out);
+    return out;
+  }
+  const double width_h = spec.fov_h_rad / spec.cols, width_v = spec.fov_v_rad / spec.rows;
+  margin->cols =
+      AngularMargin(spec.azimuth_centre_rad - 0.5 * spec.fov_h_rad,
+                    spec.azimuth_centre_rad + 0.5 * spec.fov_h_rad, width_h, spec.cols, margin_rad);
+  margin->rows =
+      AngularMargin(spec.elevation_centre_rad - 0.5 * spec.fov_v_rad,
+                    spec.elevation_centre_rad + 0.5 * spec.fov_v_rad, width_v, spec.rows, margin_rad);
+  if (margin->cols > 0) {
+    out.cols += 2 * margin->cols;
+    out.fov_h_rad = width_h * out.cols;
+  }
+  if (margin->rows > 0) {
+    out.rows += 2 * margin->rows;
+    out.fov_v_rad = width_v * out.rows;
+  }
+  return out;
+}
+
 std::optional<SensorSpec> SensorPreset(const std::string& name) {
   if (name == "sr3000") return Sr3000();
   if (name == "stoc") return Stoc();

@@ -37,6 +37,10 @@ SensorPeriods::SensorPeriods(const SensorSpec& spec, const BeamGridOptions& grid
                              double pose_tolerance_m, double pose_tolerance_rad,
                              double map_resolution_m)
     : spec_(spec),
+      grid_spec_(WidenedFieldOfView(
+          spec,
+          pose_tolerance_rad + std::atan(pose_tolerance_m / std::max(kMarginRangeM, spec.r_min_m)),
+          &margin_)),
       grid_options_(grid_options),
       pose_tolerance_m_(pose_tolerance_m),
       pose_tolerance_rad_(pose_tolerance_rad),
@@ -53,7 +57,8 @@ std::unique_ptr<Period> SensorPeriods::NewPeriod() {
   } else {
     p = std::make_unique<Period>();
     // Every grid of the sensor shares the first one's forward-model tables.
-    p->grid = open_ ? open_->grid->EmptyCopy() : std::make_unique<BeamGrid>(spec_, grid_options_);
+    p->grid =
+        open_ ? open_->grid->EmptyCopy() : std::make_unique<BeamGrid>(grid_spec_, grid_options_);
   }
   p->sequence = ++sequence_;
   return p;

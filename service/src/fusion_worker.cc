@@ -575,22 +575,29 @@ BeamLookup FusionWorker::InspectBeam(const std::string& sensor_id, std::optional
   if (lane == nullptr) return BeamLookup::kUnknownSensor;
   std::lock_guard<std::mutex> lock(lane->mutex);
   if (!lane->periods) return BeamLookup::kBeamOutOfRange;  // no beams before its CameraInfo
+  // Beams are numbered as the sensor's; the period's grid reaches beyond them by a margin.
+  const SensorSpec& spec = lane->periods->spec();
+  const auto cols = static_cast<std::size_t>(spec.cols);
+  const auto rows = static_cast<std::size_t>(spec.rows);
+  if (beam) {
+    if (*beam >= cols * rows) return BeamLookup::kBeamOutOfRange;
+    row = *beam / cols;
+    col = *beam % cols;
+  } else if (row >= rows || col >= cols) {
+    return BeamLookup::kBeamOutOfRange;
+  }
   const BeamGrid& grid = *lane->periods->open().grid;
   const BeamTessellation& tess = grid.tessellation();
-  if (!beam) {
-    if (row >= static_cast<std::size_t>(tess.rows()) ||
-        col >= static_cast<std::size_t>(tess.cols())) {
-      return BeamLookup::kBeamOutOfRange;
-    }
-    beam = row * static_cast<std::size_t>(tess.cols()) + col;
-  }
-  if (*beam >= tess.beam_count()) return BeamLookup::kBeamOutOfRange;
-  out->beam = *beam;
+  const BeamMargin& margin = lane->periods->beam_margin();
+  const std::size_t in_grid = (row + static_cast<std::size_t>(margin.rows)) *
+                                  static_cast<std::size_t>(tess.cols()) +
+                              col + static_cast<std::size_t>(margin.cols);
+  out->beam = row * cols + col;
   out->cell_size_m = grid.options().cell_size_m;
-  out->direction_sensor = tess.Direction(*beam);
-  out->first_hit = grid.FirstHitProbabilities(*beam);
-  out->cell_occupancy = grid.CellProbabilities(*beam);
-  out->touched = grid.Touched(*beam);
+  out->direction_sensor = tess.Direction(in_grid);
+  out->first_hit = grid.FirstHitProbabilities(in_grid);
+  out->cell_occupancy = grid.CellProbabilities(in_grid);
+  out->touched = grid.Touched(in_grid);
   return BeamLookup::kOk;
 }
 

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "../support/fusiond_fixture.h"
+#include "fusion/core/beam_tessellation.h"
 #include "fusion/core/sensor.h"
 #include "fusion/sim/scene.h"
 #include "fusion/sim/simulator.h"
@@ -159,6 +160,15 @@ void ExpectTheCentreBeamSawTheBoard(v1::FusionMap::Stub& stub) {
   v1::InspectBeamResponse reply;
   ASSERT_TRUE(stub.InspectBeam(&context, request, &reply).ok());
   EXPECT_TRUE(reply.touched());
+  // Numbered and pointing as the sensor's beams, not the period's wider grid's.
+  const int beam = (kRows / 2) * kCols + kCols / 2;
+  EXPECT_EQ(reply.beam(), static_cast<std::uint32_t>(beam));
+  const fusion::BeamTessellation tess(
+      fusion::sim::WithTessellation(*fusion::SensorPreset("sr3000"), kCols, kRows));
+  const Eigen::Vector3d d = tess.Direction(static_cast<std::size_t>(beam));
+  EXPECT_NEAR(reply.direction().x(), d.x(), 1e-9);
+  EXPECT_NEAR(reply.direction().y(), d.y(), 1e-9);
+  EXPECT_NEAR(reply.direction().z(), d.z(), 1e-9);
   ASSERT_EQ(reply.first_hit_size(), reply.cell_occupancy_size() + 1);
   double sum = 0.0, near_board = 0.0;
   for (int i = 0; i < reply.first_hit_size(); ++i) {

@@ -243,5 +243,93 @@ TEST(AsymmetricTessellationTest, TheScanNeedsAFractionOfTheSymmetricGrid) {
   EXPECT_EQ(after.beam_count(), 368u * 2048u);
 }
 
+
+// A period's grid (SensorPeriods) reaches past the sensor's field of view: the sensor's beam
+// (c, r) is the grown grid's (c + margin.cols, r + margin.rows), same direction, and every side
+// moved out by at least the margin's angle.
+TEST(WidenedFieldOfViewTest, KeepsEveryBeamAndGrowsEachSideByTheMargin) {
+  SensorSpec off_centre = *SensorPreset("stoc");
+  SetPinhole({200.0, 210.0, 70.3, 66.8, 158, 122, 2}, &off_centre);
+  SensorSpec turned = *SensorPreset("sr3000");
+  turned.azimuth_centre_rad = 0.07;
+  turned.elevation_centre_rad = -0.09;
+  const double margin_rad = 0.04;
+  for (const SensorSpec& spec : {*SensorPreset("sr3000"), *SensorPreset("stoc"), off_centre, turned}) {
+    SCOPED_TRACE(spec.name + (spec.pinhole ? " pinhole" : " angular"));
+    BeamMargin m;
+    const SensorSpec grown = WidenedFieldOfView(spec, margin_rad, &m);
+    ASSERT_EQ(ValidateSensorSpec(grown), "");
+    EXPECT_GT(m.cols, 0);
+    EXPECT_GT(m.rows, 0);
+    EXPECT_EQ(grown.cols, spec.cols + 2 * m.cols);
+    EXPECT_EQ(grown.rows, spec.rows + 2 * m.rows);
+    const BeamTessellation own(spec), wide(grown);
+    for (int r = 0; r < own.rows(); r += 7) {
+      for (int c = 0; c < own.cols(); c += 5) {
+        const std::size_t b = static_cast<std::size_t>(r * own.cols() + c);
+        const std::size_t w =
+            static_cast<std::size_t>((r + m.rows) * wide.cols() + c + m.cols);
+        ASSERT_LT((own.Direction(b) - wide.Direction(w)).norm(), 1e-9) << c << ", " << r;
+        ASSERT_EQ(wide.BeamOf(own.Direction(b)), w);
+      }
+    }
+    // The sensor's own beams, as a range of the grown grid, have the sensor's bounds.
+    const auto a = own.InsetTangents(0.5);
+    const auto in_wide = wide.InsetTangents(0.5, m.cols, m.cols + own.cols() - 1, m.rows,
+                                            m.rows + own.rows() - 1);
+    EXPECT_NEAR(in_wide.az_min, a.az_min, 1e-9);
+    EXPECT_NEAR(in_wide.az_max, a.az_max, 1e-9);
+    EXPECT_NEAR(in_wide.el_min, a.el_min, 1e-9);
+    EXPECT_NEAR(in_wide.el_max, a.el_max, 1e-9);
+    const auto edges = own.InsetTangents(0.0), wide_edges = wide.InsetTangents(0.0);
+    EXPECT_GE(std::atan(edges.az_min) - std::atan(wide_edges.az_min), margin_rad - 1e-9);
+    EXPECT_GE(std::atan(wide_edges.az_max) - std::atan(edges.az_max), margin_rad - 1e-9);
+    EXPECT_GE(std::atan(edges.el_min) - std::atan(wide_edges.el_min), margin_rad - 1e-9);
+    EXPECT_GE(std::atan(wide_edges.el_max) - std::atan(edges.el_max), margin_rad - 1e-9);
+  }
+}
+
+// A strided image's clipped last beam is whole in the grown grid: it still holds what it held.
+TEST(WidenedFieldOfViewTest, AClippedLastBeamHoldsWhatItHeld) {
+  SensorSpec clipped = *SensorPreset("stoc");
+  SetPinhole({200.0, 210.0, 70.3, 66.8, 157, 121, 2}, &clipped);
+  BeamMargin m;
+  const BeamTessellation own(clipped), wide(WidenedFieldOfView(clipped, 0.04, &m));
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-0.6, 0.6);
+  for (int i = 0; i < 20000; ++i) {
+    const Eigen::Vector3d d(u(rng), u(rng), 1.0);
+    const auto b = own.BeamOf(d);
+    if (!b) continue;
+    const int c = static_cast<int>(*b % static_cast<std::size_t>(own.cols()));
+    const int r = static_cast<int>(*b / static_cast<std::size_t>(own.cols()));
+    ASSERT_EQ(wide.BeamOf(d),
+              static_cast<std::size_t>((r + m.rows) * wide.cols() + c + m.cols));
+  }
+}
+
+TEST(WidenedFieldOfViewTest, StaysShortOfNinetyDegreesAndWithinHalfTheGrid) {
+  BeamMargin m;
+  // The laser's azimuth reaches past 90 degrees already: only its elevation grows.
+  const SensorSpec laser = *SensorPreset("laser_3d");
+  const SensorSpec grown = WidenedFieldOfView(laser, 0.02, &m);
+  EXPECT_EQ(m.cols, 0);
+  EXPECT_GT(m.rows, 0);
+  EXPECT_EQ(grown.fov_h_rad, laser.fov_h_rad);
+  // A huge margin: at most half the beams a side, and never to 90 degrees.
+  const SensorSpec sr = *SensorPreset("sr3000");
+  const SensorSpec wide = WidenedFieldOfView(sr, 3.0, &m);
+  EXPECT_LE(m.cols, sr.cols / 2);
+  EXPECT_LE(m.rows, sr.rows / 2);
+  EXPECT_LT(0.5 * wide.fov_h_rad, 1.5);
+  const BeamTessellation t(wide);
+  EXPECT_TRUE(t.HasTangentEdges());
+  // No margin, no change.
+  const SensorSpec same = WidenedFieldOfView(sr, 0.0, &m);
+  EXPECT_EQ(m.cols, 0);
+  EXPECT_EQ(m.rows, 0);
+  EXPECT_EQ(same.cols, sr.cols);
+}
+
 }  // namespace
 }  // namespace fusion

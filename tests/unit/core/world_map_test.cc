@@ -275,6 +275,63 @@ TEST_F(WorldMapTest, WouldSealTellsWhetherACloudLeavesTheOpenPeriodAlone) {
   EXPECT_EQ(periods.open().frames, 1u);
 }
 
+// A frame turned and moved within the tolerance sees past its period's first view: its
+// readings there land in the grid's margin (SensorPeriods), not rejected; the sensor's own grid
+// would have lost them.
+TEST_F(WorldMapTest, AFrameWithinTheToleranceKeepsItsReadingsPastThePeriodsView) {
+  SensorPeriods periods(spec_, SensorGridOptions(options_), options_.pose_tolerance_m,
+                        options_.pose_tolerance_rad, kRes);
+  const BeamMargin& margin = periods.beam_margin();
+  ASSERT_GT(margin.cols, 0);
+  ASSERT_GT(margin.rows, 0);
+  std::unique_ptr<Period> sealed;
+  PeriodIntegration result;
+  const auto first = Frame();
+  ASSERT_EQ(periods.Integrate(pose_, first.xyz.data(), first.size(), first.beyond_range, true,
+                              &result, &sealed),
+            MapStatus::kOk);
+  EXPECT_EQ(result.stats.rejected_outside_fov, 0u);
+  Eigen::Isometry3d turned = pose_;
+  turned.linear() = turned.linear() *
+                    Eigen::AngleAxisd(0.6 * options_.pose_tolerance_rad, Eigen::Vector3d::UnitY())
+                        .matrix() *
+                    Eigen::AngleAxisd(0.6 * options_.pose_tolerance_rad, Eigen::Vector3d::UnitX())
+                        .matrix();
+  turned.translation() += pose_.linear() * Eigen::Vector3d(0.6, 0.6, 0.0) *
+                          options_.pose_tolerance_m;
+  ASSERT_FALSE(periods.WouldSeal(turned));
+  const auto second = simulator_.Capture(turned);
+  ASSERT_EQ(periods.Integrate(turned, second.xyz.data(), second.size(), second.beyond_range,
+                              true, &result, &sealed),
+            MapStatus::kOk);
+  ASSERT_EQ(sealed, nullptr);
+  EXPECT_EQ(result.stats.rejected_outside_fov, 0u);
+  // The same points in the period's frame, binned into the sensor's own beams.
+  const Eigen::Isometry3d T_period_cloud = pose_.inverse() * turned;
+  std::vector<float> moved;
+  for (std::size_t k = 0; k < second.size(); ++k) {
+    const Eigen::Vector3d p(second.xyz[3 * k], second.xyz[3 * k + 1], second.xyz[3 * k + 2]);
+    const Eigen::Vector3d q = p.allFinite() && !p.isZero() ? T_period_cloud * p : p;
+    for (int a = 0; a < 3; ++a) moved.push_back(static_cast<float>(q[a]));
+  }
+  BeamGrid own(spec_, SensorGridOptions(options_));
+  EXPECT_GT(own.Integrate(moved.data(), second.size(), second.beyond_range).rejected_outside_fov,
+            10u)
+      << "the test's turn must take readings past the first view";
+  // Those readings touched beams of the margin.
+  const BeamGrid& grid = *periods.open().grid;
+  const int cols = grid.tessellation().cols();
+  std::size_t margin_touched = 0;
+  for (std::size_t b = 0; b < grid.tessellation().beam_count(); ++b) {
+    const int c = static_cast<int>(b % static_cast<std::size_t>(cols));
+    const int r = static_cast<int>(b / static_cast<std::size_t>(cols));
+    const bool own_beam = c >= margin.cols && c < margin.cols + spec_.cols &&
+                          r >= margin.rows && r < margin.rows + spec_.rows;
+    if (!own_beam && grid.Touched(b)) ++margin_touched;
+  }
+  EXPECT_GT(margin_touched, 0u);
+}
+
 TEST_F(WorldMapTest, CommitOnRequestKeepsTheMapAndRestartsTheGrid) {
   WorldMap map(options_);
   ASSERT_EQ(map.AddSensor("sr", spec_), MapStatus::kOk);

@@ -65,6 +65,9 @@ class BeamTessellation {
     double az_min, az_max, el_min, el_max;
   };
   [[nodiscard]] TangentBounds InsetTangents(double beams) const;
+  // The same for the beams of columns [col_lo, col_hi] and rows [row_lo, row_hi] only.
+  [[nodiscard]] TangentBounds InsetTangents(double beams, int col_lo, int col_hi, int row_lo,
+                                            int row_hi) const;
   // Angular size of one beam (full widths); for pinhole grids the largest beam's (at the
   // image centre), an upper bound of every beam's.
   [[nodiscard]] double beam_width_h_rad() const;
@@ -97,6 +100,7 @@ class BeamTessellation {
     [[nodiscard]] bool Contains(double v) const { return v >= edges_.front() && v <= edges_.back(); }
     [[nodiscard]] double lo() const { return edges_.front(); }
     [[nodiscard]] double hi() const { return edges_.back(); }
+    [[nodiscard]] double at(int k) const { return edges_[static_cast<std::size_t>(k)]; }
     // Inner edges (all but the first and last) <= v, resp. < v; v within the edges.
     [[nodiscard]] int InnerAtOrBelow(double v) const;
     [[nodiscard]] int InnerBelow(double v) const;

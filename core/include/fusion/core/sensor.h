@@ -94,6 +94,21 @@ void SetPinhole(const PinholeIntrinsics& k, SensorSpec* spec);
 void SetAngularLimits(double azimuth_min_rad, double azimuth_max_rad, double elevation_min_rad,
                       double elevation_max_rad, SensorSpec* spec);
 
+// `spec` with its field of view grown by at least `margin_rad` on every side, in whole beams of
+// the same size (pinhole: whole strides of pixels beyond the image's edges), so that beam
+// (col, row) of `spec` is beam (col + margin.cols, row + margin.rows) of the result. An axis
+// grows by at most half its own beams a side, and an angular one no further than 85 degrees
+// from the optical axis (not at all if it reaches that already). A strided image's clipped last
+// column or row (ceil(width / stride) beams) is whole in the result: it holds what it held,
+// and a little more. A sensor period's beam grid
+// (SensorPeriods) is grown so, to keep the readings of frames taken near, not at, its pose.
+struct BeamMargin {
+  int cols = 0;  // beams added left and right
+  int rows = 0;  // beams added above and below
+};
+[[nodiscard]] SensorSpec WidenedFieldOfView(const SensorSpec& spec, double margin_rad,
+                                            BeamMargin* margin);
+
 // Empty string if the spec can be used to build a forward model / beam grid, otherwise the
 // reason: r_min >= 0, r_max > r_min, 0 < epsilon < 1, delta > 0, beam_prior_length_m 0 or in
 // (0, 1000], 0 < fov_h <= 2 pi,

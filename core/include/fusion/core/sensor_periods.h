@@ -79,6 +79,12 @@ class SensorPeriods {
   // Empties the open period (a map reset).
   void Reset();
   [[nodiscard]] const SensorSpec& spec() const { return spec_; }
+  // A period's beam grid covers the sensor's field of view grown by the pose tolerance's angle
+  // and the angle its translation subtends at kMarginRangeM (or r_min, if farther): a frame
+  // taken within the tolerance keeps the readings it takes just outside the period's first
+  // view. The sensor's beam (col, row) is the grid's (col + cols, row + rows).
+  static constexpr double kMarginRangeM = 1.0;
+  [[nodiscard]] const BeamMargin& beam_margin() const { return margin_; }
   [[nodiscard]] std::size_t MemoryBytes() const;
 
  private:
@@ -94,6 +100,8 @@ class SensorPeriods {
   std::unique_ptr<Period> NewPeriod();
 
   SensorSpec spec_;
+  BeamMargin margin_;
+  SensorSpec grid_spec_;  // spec_ grown by margin_
   BeamGridOptions grid_options_;
   double pose_tolerance_m_;
   double pose_tolerance_rad_;
