@@ -182,7 +182,8 @@ BeamTessellation::TangentBounds BeamTessellation::InsetTangents(double beams, in
                                                                 int row_hi) const {
   // Row edges are kept bottom to top: row r's top edge is edge rows - r.
   const double left = tan_col_edges_.at(col_lo), right = tan_col_edges_.at(col_hi + 1);
-  const double bottom = tan_row_edges_.at(rows_ - row_hi - 1), top = tan_row_edges_.at(rows_ - row_lo);
+  const double bottom = tan_row_edges_.at(rows_ - row_hi - 1);
+  const double top = tan_row_edges_.at(rows_ - row_lo);
   if (pinhole_) {
     // On the image plane a beam is stride pixels wide (the last one maybe fewer: at 0.5 the
     // bounds are still its centre line, as the render's outermost rays run there).

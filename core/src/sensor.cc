@@ -189,9 +189,9 @@ SensorSpec WidenedFieldOfView(const SensorSpec& spec, double margin_rad, BeamMar
   margin->cols =
       AngularMargin(spec.azimuth_centre_rad - 0.5 * spec.fov_h_rad,
                     spec.azimuth_centre_rad + 0.5 * spec.fov_h_rad, width_h, spec.cols, margin_rad);
-  margin->rows =
-      AngularMargin(spec.elevation_centre_rad - 0.5 * spec.fov_v_rad,
-                    spec.elevation_centre_rad + 0.5 * spec.fov_v_rad, width_v, spec.rows, margin_rad);
+  margin->rows = AngularMargin(spec.elevation_centre_rad - 0.5 * spec.fov_v_rad,
+                               spec.elevation_centre_rad + 0.5 * spec.fov_v_rad, width_v,
+                               spec.rows, margin_rad);
   if (margin->cols > 0) {
     out.cols += 2 * margin->cols;
     out.fov_h_rad = width_h * out.cols;

@@ -285,8 +285,9 @@ TEST(ProjectiveMargin, UntouchedBeamsPastTheFieldOfViewChangeNothing) {
       for (int i = 0; i < 3; ++i) {
         const sim::OrganizedCloud cloud = simulator.Capture(T);
         own.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
-        const IntegrationStats st = wide.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range);
-        ASSERT_EQ(st.rejected_outside_fov, 0u);
+        ASSERT_EQ(wide.Integrate(cloud.xyz.data(), cloud.size(), cloud.beyond_range)
+                      .rejected_outside_fov,
+                  0u);
       }
       RenderOptions options;
       options.resolution_m = resolution_m;
@@ -303,8 +304,10 @@ TEST(ProjectiveMargin, UntouchedBeamsPastTheFieldOfViewChangeNothing) {
             // Occupied values come from the traced voxels: the same. Free ones are the
             // strongest of a superset of beams the pyramid's cells give, which depends on how
             // its cells fall: the same class, p within the equivalence tests' 0.05.
-            const bool same = v && (n.log_odds > 0.0f ? *v == n.log_odds
-                                                      : *v <= 0.0f && std::abs(P(*v) - P(n.log_odds)) <= 0.05);
+            const bool same =
+                v && (n.log_odds > 0.0f
+                          ? *v == n.log_odds
+                          : *v <= 0.0f && std::abs(P(*v) - P(n.log_odds)) <= 0.05);
             if (!same) ++differ;
           }
         }

@@ -254,7 +254,8 @@ TEST(WidenedFieldOfViewTest, KeepsEveryBeamAndGrowsEachSideByTheMargin) {
   turned.azimuth_centre_rad = 0.07;
   turned.elevation_centre_rad = -0.09;
   const double margin_rad = 0.04;
-  for (const SensorSpec& spec : {*SensorPreset("sr3000"), *SensorPreset("stoc"), off_centre, turned}) {
+  for (const SensorSpec& spec :
+       {*SensorPreset("sr3000"), *SensorPreset("stoc"), off_centre, turned}) {
     SCOPED_TRACE(spec.name + (spec.pinhole ? " pinhole" : " angular"));
     BeamMargin m;
     const SensorSpec grown = WidenedFieldOfView(spec, margin_rad, &m);

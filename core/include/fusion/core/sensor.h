@@ -100,8 +100,8 @@ void SetAngularLimits(double azimuth_min_rad, double azimuth_max_rad, double ele
 // grows by at most half its own beams a side, and an angular one no further than 85 degrees
 // from the optical axis (not at all if it reaches that already). A strided image's clipped last
 // column or row (ceil(width / stride) beams) is whole in the result: it holds what it held,
-// and a little more. A sensor period's beam grid
-// (SensorPeriods) is grown so, to keep the readings of frames taken near, not at, its pose.
+// and a little more. A sensor period's beam grid (SensorPeriods) is grown so, to keep the
+// readings of frames taken near, not at, its pose.
 struct BeamMargin {
   int cols = 0;  // beams added left and right
   int rows = 0;  // beams added above and below
