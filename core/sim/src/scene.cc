@@ -188,10 +188,18 @@ double Scene::DistanceToSurface(const Eigen::Vector3d& p_m) const {
 }
 
 bool Scene::SurfaceIntersects(const Eigen::AlignedBox3d& box_m) const {
-  for (const auto& r : rectangles_) {
+  // A surface that only touches the box along its edge (the board's rim on a voxel face) holds
+  // no area of it: the surfaces are tested shrunk by kTouchM. A plane lying in a face still
+  // counts (a rectangle has no thickness to shrink); a solid's face lying in a voxel's face
+  // belongs to the voxel inside the solid.
+  constexpr double kTouchM = 1e-9;
+  for (Rectangle r : rectangles_) {
+    r.half_u_m -= kTouchM;
+    r.half_v_m -= kTouchM;
     if (RectangleIntersectsAabb(r, box_m)) return true;
   }
-  for (const auto& b : boxes_) {
+  for (Box b : boxes_) {
+    b.half_extents_m.array() -= kTouchM;
     if (!ObbOverlapsAabb(b, box_m)) continue;
     // Overlapping but entirely inside the solid: no surface passes through the
     // voxel.

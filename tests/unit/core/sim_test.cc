@@ -56,6 +56,30 @@ TEST(Scene, SurfaceTests) {
       Eigen::AlignedBox3d(Eigen::Vector3d(1.74, 0.62, 0.0), Eigen::Vector3d(1.76, 0.64, 0.02))));
 }
 
+// A voxel that the board's rim only touches (its side at y = 0.6, its bottom at z = -0.3, on
+// 2 cm voxel faces) holds none of its area; a solid's face lying in a voxel face belongs to the
+// voxel inside the solid.
+TEST(Scene, SurfaceTouchingAVoxelsFaceAlongItsRimHoldsNoneOfIt) {
+  const Scene scene = PaperBoardScene();
+  const auto voxel = [](double x, double y, double z) {
+    return Eigen::AlignedBox3d(Eigen::Vector3d(x, y, z), Eigen::Vector3d(x, y, z).array() + 0.02);
+  };
+  EXPECT_TRUE(scene.SurfaceIntersects(voxel(1.74, 0.58, 0.0)));    // inside the rim
+  EXPECT_FALSE(scene.SurfaceIntersects(voxel(1.74, 0.60, 0.0)));   // beside the side
+  EXPECT_FALSE(scene.SurfaceIntersects(voxel(1.74, -0.62, 0.0)));  // the other side
+  EXPECT_TRUE(scene.SurfaceIntersects(voxel(1.74, 0.0, -0.30)));   // the bottom row
+  EXPECT_FALSE(scene.SurfaceIntersects(voxel(1.74, 0.0, -0.32)));  // under the bottom
+  // A unit cube from x = 3 to 4: its face x = 3 belongs to the voxel inside it.
+  Scene boxes;
+  Box box;
+  box.T_world_box.translation() = Eigen::Vector3d(3.5, 0.5, 0.5);
+  box.half_extents_m = Eigen::Vector3d(0.5, 0.5, 0.5);
+  boxes.AddBox(box);
+  EXPECT_TRUE(boxes.SurfaceIntersects(voxel(3.0, 0.4, 0.4)));
+  EXPECT_FALSE(boxes.SurfaceIntersects(voxel(2.98, 0.4, 0.4)));
+  EXPECT_FALSE(boxes.SurfaceIntersects(voxel(3.4, 0.4, 0.4)));  // inside the solid
+}
+
 TEST(SceneFile, ParsesAndRejects) {
   std::string error;
   const auto scene = ParseScene(
