@@ -195,7 +195,7 @@ fusion::v1::ServiceConfig DefaultConfig() {
   map->set_fusion_rule(FusionRuleName(WorldMapOptions::kDefaultRule));
   map->set_pose_tolerance_m(WorldMapOptions::kDefaultPoseToleranceM);
   map->set_pose_tolerance_deg(WorldMapOptions::kDefaultPoseToleranceDeg);
-  map->set_render_interval_ms(200);
+  map->set_render_interval_ms(10);
   map->set_occupied_threshold(kServiceOccupiedThreshold);
   map->set_free_threshold(kServiceFreeThreshold);
   map->set_beam_cell_size_m(kServiceBeamCellSizeM);

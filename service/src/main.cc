@@ -29,7 +29,7 @@ Usage: fusiond [options]
   --sensor ID=PRESET  accept clouds of sensor ID, modelled with PRESET (sr3000, stoc);
                       repeatable, added to the configuration file's sensors
   --resolution M      map voxel size in metres (default 0.05)
-  --render-interval-ms MS  render cadence (default 200)
+  --render-interval-ms MS  render cadence (default 10)
   --snapshot FILE     snapshot file (.ot): loaded at start, written periodically and on exit
   --snapshot-interval S    periodic snapshot interval in seconds, 0 = only on exit (default 30)
   --metrics-listen HOST:PORT  Prometheus /metrics over HTTP (default off; e.g.
