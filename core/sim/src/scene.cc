@@ -21,12 +21,14 @@ bool SeparatedOn(const Eigen::Vector3d& axis, double center_gap, double r1, doub
   return std::abs(center_gap) > r1 + r2;
 }
 
-bool RectangleIntersectsAabb(const Rectangle& r, const Eigen::AlignedBox3d& box) {
+// The rectangle's extent is taken inset_m smaller on each side (SurfaceIntersects).
+bool RectangleIntersectsAabb(const Rectangle& r, const Eigen::AlignedBox3d& box, double inset_m) {
   const Eigen::Vector3d c = box.center();
   const Eigen::Vector3d h = box.sizes() / 2.0;
   const Eigen::Vector3d t = r.center_m - c;
   auto rect_radius = [&](const Eigen::Vector3d& a) {
-    return r.half_u_m * std::abs(r.axis_u.dot(a)) + r.half_v_m * std::abs(r.axis_v.dot(a));
+    return (r.half_u_m - inset_m) * std::abs(r.axis_u.dot(a)) +
+           (r.half_v_m - inset_m) * std::abs(r.axis_v.dot(a));
   };
   std::vector<Eigen::Vector3d> axes = {Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
                                        Eigen::Vector3d::UnitZ(), r.Normal()};
@@ -41,14 +43,15 @@ bool RectangleIntersectsAabb(const Rectangle& r, const Eigen::AlignedBox3d& box)
   return true;
 }
 
-bool ObbOverlapsAabb(const Box& b, const Eigen::AlignedBox3d& box) {
+// The box's half extents are taken inset_m smaller (SurfaceIntersects).
+bool ObbOverlapsAabb(const Box& b, const Eigen::AlignedBox3d& box, double inset_m) {
   const Eigen::Vector3d c = box.center();
   const Eigen::Vector3d h = box.sizes() / 2.0;
   const Eigen::Matrix3d R = b.T_world_box.linear();
   const Eigen::Vector3d t = b.T_world_box.translation() - c;
   auto obb_radius = [&](const Eigen::Vector3d& a) {
     double s = 0.0;
-    for (int i = 0; i < 3; ++i) s += b.half_extents_m[i] * std::abs(R.col(i).dot(a));
+    for (int i = 0; i < 3; ++i) s += (b.half_extents_m[i] - inset_m) * std::abs(R.col(i).dot(a));
     return s;
   };
   std::vector<Eigen::Vector3d> axes;
@@ -63,9 +66,9 @@ bool ObbOverlapsAabb(const Box& b, const Eigen::AlignedBox3d& box) {
   return true;
 }
 
-bool InsideBox(const Box& b, const Eigen::Vector3d& p) {
+bool InsideBox(const Box& b, const Eigen::Vector3d& p, double inset_m) {
   const Eigen::Vector3d q = b.T_world_box.inverse() * p;
-  return (q.cwiseAbs() - b.half_extents_m).maxCoeff() <= 0.0;
+  return (q.cwiseAbs().array() - (b.half_extents_m.array() - inset_m)).maxCoeff() <= 0.0;
 }
 
 std::optional<double> RayBox(const Box& b, const Eigen::Vector3d& origin,
@@ -193,19 +196,17 @@ bool Scene::SurfaceIntersects(const Eigen::AlignedBox3d& box_m) const {
   // counts (a rectangle has no thickness to shrink); a solid's face lying in a voxel's face
   // belongs to the voxel inside the solid.
   constexpr double kTouchM = 1e-9;
-  for (Rectangle r : rectangles_) {
-    r.half_u_m -= kTouchM;
-    r.half_v_m -= kTouchM;
-    if (RectangleIntersectsAabb(r, box_m)) return true;
+  for (const Rectangle& r : rectangles_) {
+    if (RectangleIntersectsAabb(r, box_m, kTouchM)) return true;
   }
-  for (Box b : boxes_) {
-    b.half_extents_m.array() -= kTouchM;
-    if (!ObbOverlapsAabb(b, box_m)) continue;
+  for (const Box& b : boxes_) {
+    if (!ObbOverlapsAabb(b, box_m, kTouchM)) continue;
     // Overlapping but entirely inside the solid: no surface passes through the
     // voxel.
     bool all_inside = true;
     for (int c = 0; c < 8 && all_inside; ++c) {
-      all_inside = InsideBox(b, box_m.corner(static_cast<Eigen::AlignedBox3d::CornerType>(c)));
+      all_inside =
+          InsideBox(b, box_m.corner(static_cast<Eigen::AlignedBox3d::CornerType>(c)), kTouchM);
     }
     if (!all_inside) return true;
   }
