@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <deque>
+#include <utility>
 
 #include "fusion/core/projective_render.h"
 #include "fusion/service/admission.h"
@@ -24,6 +26,7 @@ struct FusionWorker::Lane {
   // the grid as it is and starts a new period.
   const Period* rendering = nullptr;
   std::condition_variable rendered_cv;
+  bool cloud_held = false;  // the integrator holds a cloud until that render ends (Integrate)
   // The spec its beam grid has, for SpecOf (which must not wait for a render of the period).
   mutable std::mutex spec_mutex;
   std::optional<SensorSpec> spec;
@@ -180,21 +183,41 @@ FusionWorker::Lane* FusionWorker::LaneOf(const std::string& sensor_id) const {
 void FusionWorker::IntegratorLoop() {
   LowerPriority(options_.nice, "integrator");
   std::vector<Cloud> clouds;
+  std::deque<Cloud> held;  // popped, not yet integrated, in the order they came
   while (!stop_) {
     clouds.clear();
+    // Woken (IngestQueues::Wake) also when a render ends that a held cloud waits for.
     queues_->PopAll(&clouds, std::chrono::steady_clock::now() + std::chrono::milliseconds(500));
-    for (const Cloud& cloud : clouds) Integrate(cloud);
+    for (Cloud& cloud : clouds) held.push_back(std::move(cloud));
+    IntegrateHeld(&held, /*wait=*/held.size() > kMaxHeldClouds);
   }
-  do {  // what is still queued
+  do {  // what is still queued or held, each waiting for the renderer where it must
     clouds.clear();
     queues_->PopAll(&clouds, std::chrono::steady_clock::now());
-    for (const Cloud& cloud : clouds) Integrate(cloud);
+    for (Cloud& cloud : clouds) held.push_back(std::move(cloud));
+    IntegrateHeld(&held, /*wait=*/true);
   } while (!clouds.empty());
 }
 
-void FusionWorker::Integrate(const Cloud& cloud) {
+void FusionWorker::IntegrateHeld(std::deque<Cloud>* held, bool wait) {
+  // A lane whose cloud must wait for a render keeps its later clouds behind that one: each
+  // sensor's clouds are integrated in the order they came.
+  std::vector<const Lane*> waiting;
+  std::deque<Cloud> left;
+  for (Cloud& cloud : *held) {
+    const Lane* lane = LaneOf(cloud.sensor_id);
+    const bool behind = std::find(waiting.begin(), waiting.end(), lane) != waiting.end();
+    if (behind || !Integrate(cloud, wait)) {
+      if (!behind) waiting.push_back(lane);
+      left.push_back(std::move(cloud));
+    }
+  }
+  held->swap(left);
+}
+
+bool FusionWorker::Integrate(const Cloud& cloud, bool wait) {
   Lane* lane = LaneOf(cloud.sensor_id);
-  if (lane == nullptr || lane->counters == nullptr) return;
+  if (lane == nullptr || lane->counters == nullptr) return true;
   const Eigen::Isometry3d T_world_sensor =
       cloud.T_world_published * lane->setup->T_published_sensor;
   bool may_seal = true;
@@ -217,13 +240,19 @@ void FusionWorker::Integrate(const Cloud& cloud) {
       queues_->CountRejected(cloud.sensor_id, RejectReason::kNoCameraInfo);
       rejections_.Log(RejectReason::kNoCameraInfo, cloud.sensor_id,
                       "the sensor has no beams before its first CameraInfo");
-      return;
+      return true;
     }
     // Into a period the renderer is reading only after that render; sealing it leaves it alone.
-    lane->rendered_cv.wait(lock, [&] {
+    // Without `wait`, the cloud is held meanwhile and the renderer wakes the integrator after.
+    const auto free_to_integrate = [&] {
       return lane->rendering != &lane->periods->open() ||
              (may_seal && lane->periods->WouldSeal(T_world_sensor));
-    });
+    };
+    if (!wait && !free_to_integrate()) {
+      lane->cloud_held = true;
+      return false;
+    }
+    lane->rendered_cv.wait(lock, free_to_integrate);
     const auto start = options_.histograms.integration_seconds ? Clock::now() : Clock::time_point{};
     try {
       status = lane->periods->Integrate(T_world_sensor, cloud.xyz.data(), cloud.xyz.size() / 3,
@@ -231,7 +260,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
     } catch (const std::exception& e) {
       spdlog::error("worker: cloud {} of '{}' failed: {}", cloud.sequence_number,
                     cloud.sensor_id, e.what());
-      return;
+      return true;
     }
     ObserveIntegration(*lane, cloud, start, status);
     lane->counters->memory_bytes.store(lane->periods->MemoryBytes());
@@ -240,7 +269,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
   if (status != MapStatus::kOk) {
     spdlog::warn("worker: cloud {} of '{}' not integrated: {}", cloud.sequence_number,
                  cloud.sensor_id, MapStatusName(status));
-    return;
+    return true;
   }
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
@@ -283,6 +312,7 @@ void FusionWorker::Integrate(const Cloud& cloud) {
                 cloud.sequence_number, cloud.sensor_id, result.stats.updated,
                 result.stats.beyond_range, result.stats.missing,
                 result.merged ? " (merged: the renderer is behind)" : "");
+  return true;
 }
 
 // Under lane.mutex; `start` is when the integration began (read only with that histogram).
@@ -454,11 +484,14 @@ bool FusionWorker::RenderOpen(Lane& lane) {
     spdlog::error("worker: render of '{}' failed: {}", lane.setup->id, e.what());
     rendered = false;
   }
+  bool held = false;
   {
     std::lock_guard<std::mutex> lock(lane.mutex);
     lane.rendering = nullptr;
+    held = std::exchange(lane.cloud_held, false);
   }
   lane.rendered_cv.notify_all();
+  if (held) queues_->Wake();
   if (!rendered) return false;
   const Clock::time_point replace_start = Clock::now();
   (void)map_->ReplaceLive(lane.setup->id, std::move(grid));

@@ -1,7 +1,8 @@
 // FusionWorker: the published map follows the live map, including voxels that lose their
 // information (deleted from the published octree, not left behind); a moving sensor's periods
 // are committed in order, each cloud counted once (the same map as core's WorldMap fed on one
-// thread); a moving sensor's frame is in the map before the next one comes; a renderer that
+// thread); a moving sensor's frame is in the map before the next one comes; another sensor's
+// clouds are integrated while one sensor's period renders; a renderer that
 // falls behind gets clouds merged, never dropped; a cloud of a camera still waiting for its
 // CameraInfo is counted as rejected.
 #include "fusion/service/fusion_worker.h"
@@ -246,6 +247,52 @@ TEST_F(FusionWorkerTest, ARendererBehindGetsCloudsMergedNeverDropped) {
   EXPECT_GT(counters.merged.load(), 0u) << "the renderer kept up with 20 queued clouds?";
   EXPECT_EQ(worker_->in_map(), static_cast<std::uint64_t>(kClouds)) << "every cloud in the map";
   EXPECT_LT(worker_->renders(), static_cast<std::uint64_t>(kClouds));
+}
+
+// While the renderer reads one sensor's open period, the integrator holds that sensor's next
+// cloud and goes on with the other sensors' clouds; the held cloud joins the period after the
+// render. ("a" comes before "b" in every batch the integrator takes from the queues.)
+TEST_F(FusionWorkerTest, AnotherSensorsCloudIsIntegratedWhileOnesPeriodRenders) {
+  worker_->Stop();
+  worker_.reset();
+  WorkerOptions options = Options();
+  options.map.resolution_m = options.map.render.resolution_m = 0.02;
+  // A full SR-3000 frame traced ray by ray at 2 cm: a render of a good part of a second.
+  options.map.render.method = RenderMethod::kRayTraced;
+  SensorSetup slow, fast;
+  slow.id = "a";
+  slow.spec = *SensorPreset("sr3000");
+  fast.id = "b";
+  fast.spec = sensor_.spec;  // 16 x 12 beams
+  IngestQueues queues{{{"a", 8}, {"b", 8}}};
+  SnapshotHub hub{SnapshotHub::kDefaultMaxLoggedRegions, 0.02};
+  FusionWorker worker(options, {slow, fast}, &queues, &hub);
+  ASSERT_TRUE(worker.Start(nullptr).ok());
+  const auto cloud_of = [](const SensorSetup& sensor, std::uint64_t seq) {
+    Cloud cloud = WallAt(BeamTessellation(sensor.spec), 2.0, seq);
+    cloud.sensor_id = sensor.id;
+    return cloud;
+  };
+  const auto& a = *queues.counters("a");
+  const auto& b = *queues.counters("b");
+  const auto wait_for = [](const std::atomic<std::uint64_t>& n, std::uint64_t value) {
+    const auto end = std::chrono::steady_clock::now() + 60s;
+    while (n.load() < value && std::chrono::steady_clock::now() < end) {
+      std::this_thread::sleep_for(1ms);
+    }
+    return n.load();
+  };
+  ASSERT_TRUE(queues.Push(cloud_of(slow, 1), &never_));
+  ASSERT_EQ(wait_for(a.integrated, 1), 1u);
+  std::this_thread::sleep_for(
+      100ms);  // the renderer is on the new period at once (its first frame)
+  ASSERT_TRUE(queues.Push(cloud_of(slow, 2), &never_));  // the same pose: joins that period
+  ASSERT_TRUE(queues.Push(cloud_of(fast, 1), &never_));
+  ASSERT_EQ(wait_for(b.integrated, 1), 1u);
+  EXPECT_EQ(a.integrated.load(), 1u) << "the other sensor's cloud waited behind the render";
+  EXPECT_EQ(wait_for(a.integrated, 2), 2u) << "the held cloud is integrated after the render";
+  worker.Stop();
+  EXPECT_EQ(worker.in_map(), 3u);
 }
 
 // A camera whose intrinsics come from its CameraInfo has no beams before it: a cloud then is

@@ -70,6 +70,9 @@ class FusionWorker {
  public:
   // Sealed periods a sensor may have waiting for the renderer before clouds are merged.
   static constexpr std::size_t kMaxSealedPeriods = 2;
+  // Clouds the integrator may hold while their sensor's open period is being rendered, going on
+  // with other sensors' clouds; beyond, it waits for the render (the queues' limits hold then).
+  static constexpr std::size_t kMaxHeldClouds = 8;
 
   FusionWorker(WorkerOptions options, std::vector<SensorSetup> sensors, IngestQueues* queues,
                SnapshotHub* hub);
@@ -120,7 +123,12 @@ class FusionWorker {
   [[nodiscard]] Status AddBeamGridLocked(Lane& lane, const SensorSpec& spec);
   void IntegratorLoop();
   void RendererLoop();
-  void Integrate(const Cloud& cloud);
+  // Integrates the clouds of *held in order, leaving in it those that must wait for a render
+  // of their sensor's open period (and the same sensor's after them); with `wait`, waits.
+  void IntegrateHeld(std::deque<Cloud>* held, bool wait);
+  // Integrates `cloud` (or counts it rejected); returns false without waiting when the renderer
+  // reads the period it would join and `wait` is false: the renderer wakes the integrator then.
+  bool Integrate(const Cloud& cloud, bool wait);
   void ObserveIntegration(Lane& lane, const Cloud& cloud,
                           std::chrono::steady_clock::time_point start, MapStatus status);
   // One renderer step (sealed period first, else an open period); false if there was nothing
