@@ -284,8 +284,8 @@ TEST_F(FusionWorkerTest, AnotherSensorsCloudIsIntegratedWhileOnesPeriodRenders) 
   };
   ASSERT_TRUE(queues.Push(cloud_of(slow, 1), &never_));
   ASSERT_EQ(wait_for(a.integrated, 1), 1u);
-  std::this_thread::sleep_for(
-      100ms);  // the renderer is on the new period at once (its first frame)
+  // The renderer takes up the new period at once (its first frame) and reads it for ~0.8 s.
+  std::this_thread::sleep_for(100ms);
   ASSERT_TRUE(queues.Push(cloud_of(slow, 2), &never_));  // the same pose: joins that period
   ASSERT_TRUE(queues.Push(cloud_of(fast, 1), &never_));
   ASSERT_EQ(wait_for(b.integrated, 1), 1u);
