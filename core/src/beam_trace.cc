@@ -193,8 +193,11 @@ double BeamTracer::Trace(std::size_t beam, const Eigen::Vector3d& dir, double t_
       if (c1 <= c0) continue;  // shorter than a beam cell: no evidence of its own
       const double p = occupancy[j];
       const Prior& prior = PriorOfCells(c1 - c0);
-      // SegmentEvidence's dead band (prior < hazard <= 1/2: none), told without its logarithm.
-      double evidence = p > prior.probability && p <= 0.5
+      // SegmentEvidence's dead band (prior < hazard <= 1/2: none), told without its logarithm;
+      // likewise occupied evidence in a crossing that cannot become the ray's mode (it holds no
+      // more of the mass than the mode so far), which KeepOccupiedAtMode would set to 0.
+      const bool above_prior = p > prior.probability;
+      double evidence = above_prior && (p <= 0.5 || !(remaining_mass * p > mode_mass))
                             ? 0.0
                             : SegmentEvidence(p, prior.log_odds, remaining_mass);
       evidence = std::clamp(evidence, -options_.max_abs_log_odds, options_.max_abs_log_odds);

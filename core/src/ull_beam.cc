@@ -402,6 +402,41 @@ inline std::uint32_t UllBeam::FirstCellBelow(const BeamContext& ctx, const doubl
   return static_cast<std::uint32_t>(std::max(cell, start + 1));
 }
 
+inline void UllBeam::InfoEndAndMedian(const BeamContext& ctx, const double* s_at, std::size_t start,
+                                      double s_start, double tail_fraction,
+                                      BeamProfileCells* out) const {
+  const double info = tail_fraction * s_start, half = 0.5 * s_start;
+  // The composite each threshold falls in (s_at does not rise with k): as FirstCellBelow finds it.
+  std::size_t k_info = list_.size();
+  while (k_info > 0 && s_at[k_info - 1] < info) --k_info;
+  std::size_t k_half = k_info;
+  while (k_half > 0 && s_at[k_half - 1] < half) --k_half;
+  if (!(info < half) || w_all_free_ >= info || k_info != k_half || k_info == 0 ||
+      list_[k_info - 1].exploded == 0) {
+    out->info_end = FirstCellBelow(ctx, s_at, start, s_start, tail_fraction);
+    out->median = FirstCellBelow(ctx, s_at, start, s_start, 0.5);
+    return;
+  }
+  // Both in one exploded composite: FirstCellBelow's walk down from its end, which passes the
+  // lower threshold first, then on to the higher one (the same sums in the same order).
+  const Composite& c = list_[k_info - 1];
+  double tail = s_at[k_info];
+  std::size_t t = c.count;
+  while (t > 0) {
+    tail += pool_[c.pool_begin + --t];
+    if (tail >= info) break;
+  }
+  const std::size_t t_info = t;
+  if (!(tail >= half)) {
+    while (t > 0) {
+      tail += pool_[c.pool_begin + --t];
+      if (tail >= half) break;
+    }
+  }
+  out->info_end = static_cast<std::uint32_t>(std::max(c.first + t_info + 1, start + 1));
+  out->median = static_cast<std::uint32_t>(std::max(c.first + t + 1, start + 1));
+}
+
 BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from, double tail_fraction,
                                   double free_ratio) const {
   const std::size_t n = ctx.cell_count();
@@ -419,8 +454,7 @@ BeamProfileCells UllBeam::Profile(const BeamContext& ctx, std::uint32_t from, do
   if (!std::isfinite(out.free_hazard)) out.free_hazard = 0.0;
   // Information end and median (TailDropCell): the composite where S falls below the
   // threshold, then the cell inside it.
-  out.info_end = FirstCellBelow(ctx, s_at, start, zone.s_start, tail_fraction);
-  out.median = FirstCellBelow(ctx, s_at, start, zone.s_start, 0.5);
+  InfoEndAndMedian(ctx, s_at, start, zone.s_start, tail_fraction, &out);
   return out;
 }
 
