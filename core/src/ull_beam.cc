@@ -366,6 +366,15 @@ inline UllBeam::FreeZoneTails UllBeam::ScanFreeZone(const BeamContext& ctx, cons
   return tails;
 }
 
+inline std::size_t UllBeam::WalkDown(const Composite& c, std::size_t t, double threshold,
+                                     double* tail) const {
+  while (t > 0) {
+    *tail += pool_[c.pool_begin + --t];
+    if (*tail >= threshold) break;
+  }
+  return t;
+}
+
 inline std::uint32_t UllBeam::FirstCellBelow(const BeamContext& ctx, const double* s_at,
                                              std::size_t start, double s_start,
                                              double fraction) const {
@@ -391,12 +400,7 @@ inline std::uint32_t UllBeam::FirstCellBelow(const BeamContext& ctx, const doubl
       cell = lo + 1;
     } else {
       double tail = s_at[k];
-      std::size_t t = c.count;
-      while (t > 0) {
-        tail += pool_[c.pool_begin + --t];
-        if (tail >= threshold) break;
-      }
-      cell = c.first + t + 1;
+      cell = c.first + WalkDown(c, c.count, threshold, &tail) + 1;
     }
   }
   return static_cast<std::uint32_t>(std::max(cell, start + 1));
@@ -421,18 +425,8 @@ inline void UllBeam::InfoEndAndMedian(const BeamContext& ctx, const double* s_at
   // lower threshold first, then on to the higher one (the same sums in the same order).
   const Composite& c = list_[k_info - 1];
   double tail = s_at[k_info];
-  std::size_t t = c.count;
-  while (t > 0) {
-    tail += pool_[c.pool_begin + --t];
-    if (tail >= info) break;
-  }
-  const std::size_t t_info = t;
-  if (!(tail >= half)) {
-    while (t > 0) {
-      tail += pool_[c.pool_begin + --t];
-      if (tail >= half) break;
-    }
-  }
+  const std::size_t t_info = WalkDown(c, c.count, info, &tail);
+  const std::size_t t = tail >= half ? t_info : WalkDown(c, t_info, half, &tail);
   out->info_end = static_cast<std::uint32_t>(std::max(c.first + t_info + 1, start + 1));
   out->median = static_cast<std::uint32_t>(std::max(c.first + t + 1, start + 1));
 }

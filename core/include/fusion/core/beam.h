@@ -205,6 +205,9 @@ class UllBeam {
   // fraction * s_start (N + 1 if B_{N+1} alone holds that much).
   std::uint32_t FirstCellBelow(const BeamContext& ctx, const double* s_at, std::size_t start,
                                double s_start, double fraction) const;
+  // An exploded composite's cells below t added to *tail from the top down until it reaches
+  // threshold: the cell (relative to the composite) where it did, or 0.
+  std::size_t WalkDown(const Composite& c, std::size_t t, double threshold, double* tail) const;
   // out->info_end and out->median: FirstCellBelow at tail_fraction and at 1/2, in one walk of
   // the exploded composite where both fall in the same one.
   void InfoEndAndMedian(const BeamContext& ctx, const double* s_at, std::size_t start,
