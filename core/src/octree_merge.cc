@@ -98,10 +98,25 @@ Cursor TreeCursor(const octomap::OcTree& tree, const Node* node) {
   return c;
 }
 
+// The nodes [lo, hi) of a region at `depth` (a few) fill it with one value (a render decides
+// a block's voxels one by one where its parent block was mixed). They are disjoint and inside
+// the region: they fill it when their volumes add up to its volume.
+bool FillsWithOneValue(const MapNode* lo, const MapNode* hi, unsigned depth) {
+  if (hi - lo > 64) return false;
+  std::uint64_t volume = 0;
+  for (const MapNode* n = lo; n != hi; ++n) {
+    if (n->log_odds != lo->log_odds) return false;
+    volume += MortonSpan(n->depth);
+  }
+  return volume == MortonSpan(depth);
+}
+
 Cursor GridCursor(const MapNode* lo, const MapNode* hi, unsigned depth) {
   Cursor c;
   if (lo == hi) return c;
-  if (lo->depth <= depth) {  // a node covering the whole region (the only one in it)
+  // A node covering the whole region (the only one in it), or its eight children of one value:
+  // the region is written whole, not as eight leaves the target would prune into one.
+  if (lo->depth <= depth || FillsWithOneValue(lo, hi, depth)) {
     c.kind = Cursor::kUniform;
     c.value = lo->log_odds;
   } else {

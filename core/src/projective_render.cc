@@ -152,7 +152,9 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
                               const RenderOptions& options, RenderStats* stats,
                               const SaturatedFree* skip, RenderScratch* scratch) {
   const BeamTessellation& tess = grid.tessellation();
-  if (!tess.HasTangentEdges()) {
+  // The mean and the pool of a voxel's segments need every crossing of every ray, free ones
+  // included: only the max rule lets the free zones be decided block by block.
+  if (!tess.HasTangentEdges() || options.combine != VoxelCombine::kMaxLogOdds) {
     return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
   }
   RenderScratch own;  // used when the caller keeps none: everything freshly allocated
@@ -184,9 +186,7 @@ RenderedGrid RenderProjective(const BeamGrid& grid, const Eigen::Isometry3d& T_w
 RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                     const RenderOptions& options, RenderStats* stats, const SaturatedFree* skip,
                     RenderScratch* scratch) {
-  // The mean and the pool of a voxel's segments need every crossing of every ray, free ones
-  // included: only the max rule lets the free zones be decided block by block.
-  if (options.method == RenderMethod::kRayTraced || options.combine != VoxelCombine::kMaxLogOdds) {
+  if (options.method == RenderMethod::kRayTraced) {
     return RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, T_world_sensor, options, stats));
   }
   return RenderProjective(grid, T_world_sensor, options, stats, skip, scratch);

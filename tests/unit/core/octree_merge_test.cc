@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <functional>
 #include <map>
 #include <random>
@@ -207,6 +208,75 @@ TEST(FuseRegions, CoarseNodesReadAsTheirVoxels) {
   for (std::size_t i = 1; i < changed.size(); ++i) EXPECT_LT(changed[i - 1].code, changed[i].code);
   // Coarse leaves stay coarse: fewer leaves than voxels.
   EXPECT_LT(tree.getNumLeafNodes(), got.size() / 2);
+}
+
+// A render decides a mixed block's voxels one by one; where they come out with one value (or
+// nodes of one value fill a block), the block is written whole: one changed region, not a leaf
+// per node that the tree then prunes. Over a history that differs inside the block, every voxel
+// still gets its own fused value.
+TEST(FuseRegions, NodesOfOneValueFillingABlockAreWrittenAsTheBlock) {
+  std::vector<MapNode> nodes;
+  const auto voxels = [&nodes](int x, int y, int z, int side, const std::vector<float>& values) {
+    for (int i = 0; i < side * side * side; ++i) {
+      const float v = values[static_cast<std::size_t>(i) % values.size()];
+      nodes.push_back(NodeAt(x + i % side, y + (i / side) % side, z + i / (side * side), 16, v));
+    }
+  };
+  voxels(kBase, kBase, kBase, 4, {-2.0f});  // 64 voxels of one value: their depth-14 block
+  for (int c = 0; c < 8; ++c) {             // 8 depth-15 nodes of one value: the same
+    nodes.push_back(NodeAt(kBase + 4 + (c & 1) * 2, kBase + ((c >> 1) & 1) * 2,
+                           kBase + (c >> 2) * 2, 15, -2.0f));
+  }
+  voxels(kBase + 8, kBase, kBase, 2, {-1.0f});  // one depth-15 block of 8 equal voxels ...
+  for (int c = 1; c < 8; ++c) {                 // ... beside 7 depth-15 nodes of two values
+    nodes.push_back(NodeAt(kBase + 8 + (c & 1) * 2, kBase + ((c >> 1) & 1) * 2,
+                           kBase + (c >> 2) * 2, 15, c % 2 == 0 ? 1.5f : 2.5f));
+  }
+  voxels(kBase + 12, kBase, kBase, 2, {-1.0f, -1.0f, 0.5f});  // 8 voxels, not of one value
+  std::sort(nodes.begin(), nodes.end(),
+            [](const MapNode& a, const MapNode& b) { return a.code < b.code; });
+  RenderedGrid grid(0.05);
+  for (const MapNode& n : nodes) grid.Append(n);
+  ASSERT_TRUE(grid.IsValid());
+
+  octomap::OcTree tree(0.05);
+  std::vector<MapRegion> changed;
+  FuseRegions(tree, FusionPolicy{}, {{nullptr, &grid}}, {&grid}, &changed);
+  std::vector<MapRegion> expected{{MortonOf(Key({kBase, kBase, kBase})), 14},
+                                  {MortonOf(Key({kBase + 4, kBase, kBase})), 14}};
+  for (int c = 0; c < 8; ++c) {
+    expected.push_back(
+        {MortonOf(Key({kBase + 8 + (c & 1) * 2, kBase + ((c >> 1) & 1) * 2, kBase + (c >> 2) * 2})),
+         15});
+  }
+  for (const MapNode& n : nodes) {
+    if (KeyOfMorton(n.code)[0] >= kBase + 12) expected.push_back({n.code, 16});
+  }
+  EXPECT_EQ(changed, expected);
+  std::map<KeyTuple, std::vector<float>> opinions;
+  AddToDense(grid, &opinions);
+  Dense want;
+  for (const auto& [k, v] : opinions) want[k] = v.front();
+  EXPECT_EQ(DenseOf(tree), want);
+  ExpectInvariants(tree, tree.getRoot());
+
+  // Over a history of random voxels: each voxel fused on its own.
+  std::mt19937 rng(41);
+  const RenderedGrid h = RandomGrid(rng, 0.9, {-3.0f, -1.0f, 1.5f});
+  octomap::OcTree history(0.05);
+  FuseRegions(history, FusionPolicy{}, {{nullptr, &h}}, {&h});
+  const FusionPolicy policy = FusionPolicy::Make(FusionRule::kIndependentOpinionPool, 0.01, 0.99);
+  octomap::OcTree fused(history);
+  FuseRegions(fused, policy, {{&history, nullptr}, {nullptr, &grid}}, {&grid});
+  std::map<KeyTuple, std::vector<float>> all;
+  AddToDense(h, &all);
+  AddToDense(grid, &all);
+  const Dense got = DenseOf(fused);
+  for (const auto& [k, v] : opinions) {
+    ASSERT_EQ(got.count(k), 1u);
+    EXPECT_FLOAT_EQ(got.at(k), policy.Fuse(all.at(k).data(), all.at(k).size()));
+  }
+  ExpectInvariants(fused, fused.getRoot());
 }
 
 TEST(FuseRegions, HistoryAndGridsFuseOnlyWhereTheDriverSays) {

@@ -53,8 +53,9 @@ class RenderScratch {
 
 // Same inputs and frames as RenderBeamGrid (the oracle); the result holds coarse free blocks
 // and voxels, in Morton order. Sensors whose field of view reaches 180 degrees on either axis
-// are rendered ray by ray (the pyramid needs the tangent tables). `skip` (may be null): see
-// SaturatedFree.
+// are rendered ray by ray (the pyramid needs the tangent tables), and so are the voxel rules
+// other than the max (the mean and the pool of a voxel's segments need every crossing of every
+// ray, free ones included). `skip` (may be null): see SaturatedFree.
 [[nodiscard]] RenderedGrid RenderProjective(const BeamGrid& grid,
                                             const Eigen::Isometry3d& T_world_sensor,
                                             const RenderOptions& options,
@@ -62,9 +63,7 @@ class RenderScratch {
                                             const SaturatedFree* skip = nullptr,
                                             RenderScratch* scratch = nullptr);
 
-// options.method's render: RenderProjective, or RenderBeamGrid as a RenderedGrid of voxels. The
-// voxel rules other than the max (the mean and the pool of a voxel's segments) need every
-// crossing of every ray, free ones included, and are always rendered ray by ray.
+// options.method's render: RenderProjective, or RenderBeamGrid as a RenderedGrid of voxels.
 // `scratch` (may be null): buffers reused from the renders before.
 [[nodiscard]] RenderedGrid Render(const BeamGrid& grid, const Eigen::Isometry3d& T_world_sensor,
                                   const RenderOptions& options, RenderStats* stats = nullptr,
