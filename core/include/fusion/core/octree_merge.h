@@ -50,7 +50,9 @@ struct CatchUp {
 // (sources without an opinion left out; none at all: the region is removed). Regions no driver
 // touches keep what they hold. Sources and target must share the resolution; the target may
 // be one of the sources. Appends the regions whose value changed (removed included) in Morton
-// order to *changed, if not null.
+// order to *changed, if not null. A grid's few nodes of one value that fill a region (a
+// render's voxels decided one by one) count as one node of the region: it is written whole,
+// and reported as one region.
 // With a catch-up, the target first becomes the reference in its regions (as CopyRegions),
 // except where a driver leads, whose fused value is written directly; a region counts as
 // changed there when its value differs from the reference's. One walk instead of a copy and a
