@@ -114,8 +114,8 @@ bool FillsWithOneValue(const MapNode* lo, const MapNode* hi, unsigned depth) {
 Cursor GridCursor(const MapNode* lo, const MapNode* hi, unsigned depth) {
   Cursor c;
   if (lo == hi) return c;
-  // A node covering the whole region (the only one in it), or its eight children of one value:
-  // the region is written whole, not as eight leaves the target would prune into one.
+  // A node covering the whole region (the only one in it), or a few nodes of one value filling
+  // it: the region is written whole, not as leaves the target would prune into one.
   if (lo->depth <= depth || FillsWithOneValue(lo, hi, depth)) {
     c.kind = Cursor::kUniform;
     c.value = lo->log_odds;

@@ -356,6 +356,29 @@ TEST(ProjectiveThreads, GiveTheNodesOneThreadGives) {
   }
 }
 
+// The voxel rules other than the max cannot decide free blocks whole: RenderProjective renders
+// them ray by ray, as Render does, node for node.
+TEST(ProjectiveRules, TheMeanAndThePoolAreRenderedRayByRay) {
+  const sim::SensorRun run = PaperRun("sr3000");
+  const BeamGrid grid = GridAt(run, run.T_world_sensor, 3, 9);
+  for (const VoxelCombine combine :
+       {VoxelCombine::kWeightedMeanLogOdds, VoxelCombine::kIndependentPool}) {
+    RenderOptions options;
+    options.resolution_m = 0.05;
+    options.combine = combine;
+    const RenderedGrid ours = RenderProjective(grid, run.T_world_sensor, options);
+    const RenderedGrid traced =
+        RenderedGrid::FromLocalGrid(RenderBeamGrid(grid, run.T_world_sensor, options));
+    ASSERT_GT(traced.size(), 1000u);
+    ASSERT_EQ(ours.size(), traced.size());
+    for (std::size_t i = 0; i < ours.size(); ++i) {
+      const MapNode& a = ours.nodes()[i];
+      const MapNode& b = traced.nodes()[i];
+      ASSERT_TRUE(a.code == b.code && a.depth == b.depth && a.log_odds == b.log_odds) << i;
+    }
+  }
+}
+
 // Renders through one scratch (as the map makes them) give what fresh renders give, node for
 // node, whatever the renders before it were: other sensors, poses, resolutions and threads.
 TEST(RenderScratchTest, ReusedBuffersChangeNothing) {
