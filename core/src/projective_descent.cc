@@ -49,14 +49,16 @@ class Descent {
   // Visits the children of a block that is neither wholly free nor wholly unknown.
   // `beams` is what the pyramid said of this block (a superset of every child's beams):
   // voxels are classified from it, only the voxels it leaves undecided look closer.
-  void VisitChildren(unsigned depth, const std::array<int, 3>& key_min, const Aggregate& beams,
-                     bool free_through, const MapHere& map);
+  // `code`: the block's Morton code (MortonOf(key_min)), carried down rather than recomputed.
+  void VisitChildren(unsigned depth, const std::array<int, 3>& key_min, std::uint64_t code,
+                     const Aggregate& beams, bool free_through, const MapHere& map);
 
   // A mixed block of kShareDepth left to a descent thread: what VisitChildren needs of it, and
   // where its nodes go among the ones decided above it.
   struct Task {
     unsigned depth;
     std::array<int, 3> key_min;
+    std::uint64_t code;
     Aggregate beams;
     bool free_through;
     MapHere map;
@@ -66,13 +68,13 @@ class Descent {
   };
   // VisitChildren on a task's block (the root's, or one shared out).
   [[gnu::noinline]] void Visit(const Task& task) {
-    VisitChildren(task.depth, task.key_min, task.beams, task.free_through, task.map);
+    VisitChildren(task.depth, task.key_min, task.code, task.beams, task.free_through, task.map);
   }
   // The root's task.
   [[nodiscard]] Task Root() const {
     Aggregate everything;
     everything.touched = everything.beams = 1;
-    return {0, {0, 0, 0}, everything, /*free_through=*/false, RootMap(), 0};
+    return {0, {0, 0, 0}, 0, everything, /*free_through=*/false, RootMap(), 0};
   }
   // Out of line, as the vector's growth is rare (kept out of VisitChildren's body).
   [[gnu::noinline]] void LeaveTask(const Task& task) { tasks_->push_back(task); }
@@ -115,14 +117,14 @@ class Descent {
     Aggregate beams;
   };
 
-  MapHere ChildMap(const MapHere& map, unsigned depth, const std::array<int, 3>& key_min, int child,
+  MapHere ChildMap(const MapHere& map, unsigned depth, std::uint64_t code, int child,
                    std::array<const MapNode*, kMaxOthers>* next) const;
   // The history holds the whole block at or below the free clamp, and no other live
   // contribution says anything there.
   [[nodiscard]] bool Saturated(const MapHere& m) const;
   // A ray crossed a voxel of the block (its first key, its depth) in a beam's first-hit mass
   // with occupied evidence.
-  [[nodiscard]] bool HoldsTracedOccupied(const std::array<int, 3>& key_min, unsigned depth) const;
+  [[nodiscard]] bool HoldsTracedOccupied(std::uint64_t code, unsigned depth) const;
   [[nodiscard]] TanBounds Bounds(double inset) const;
   // The known region that applies at the near / far end of a box.
   [[nodiscard]] const TanBounds& KnownAt(double r2) const {
@@ -134,15 +136,15 @@ class Descent {
   // reach the voxel if its centre line does (its direction lies in the voxel's angular box);
   // beyond r_split, where beams are wider than voxels and traced with sub-rays, if the voxel
   // overlaps its sector.
-  void VisitVoxel(const std::array<int, 3>& key_min, const Box& box, const Verdict& v,
-                  bool saturated);
+  void VisitVoxel(const std::array<int, 3>& key_min, std::uint64_t code, const Box& box,
+                  const Verdict& v, bool saturated);
   // The touched beams among columns [c0, c1) and rows [r0, r1) if the centre line of one of
   // them that is free into the box crosses it (a slab test: the angular box also holds
   // directions that miss a cube at its corners); else nothing.
   Aggregate CentreLinesThrough(const Box& box, int c0, int c1, int r0, int r1);
   // A beam's centre line in the world frame, computed once per render when first needed.
   const Eigen::Vector3f& WorldDirection(std::size_t beam);
-  void Emit(unsigned depth, const std::array<int, 3>& key_min, float value);
+  void Emit(unsigned depth, std::uint64_t code, float value);
 
   const BeamTessellation& tess_;
   const SaturatedFree* skip_;
@@ -235,11 +237,13 @@ inline Descent::Descent(const BeamGrid& grid, const Eigen::Isometry3d& T_world_s
 }
 
 inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key_min,
-                                   const Aggregate& beams, bool free_through, const MapHere& map) {
+                                   std::uint64_t code, const Aggregate& beams, bool free_through,
+                                   const MapHere& map) {
   const unsigned child_depth = depth + 1;
   const int half = 1 << (kTreeDepth - child_depth);
   const double res = options_.resolution_m;
   const double child_size = res * half;
+  const std::uint64_t span = MortonSpan(child_depth);
   Eigen::Vector3d lo;
   for (int a = 0; a < 3; ++a) lo[a] = (key_min[a] - kMapKeyOffset) * res;
   F4 point[kLatticePoints];
@@ -250,15 +254,16 @@ inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key
   std::copy_n(map.lo.begin(), skip_ != nullptr ? skip_->others.size() : 0, next.begin());
   for (int child = 0; child < 8; ++child) {
     const int cx = child & 1, cy = (child >> 1) & 1, cz = (child >> 2) & 1;
-    const MapHere child_map = ChildMap(map, depth, key_min, child, &next);
+    const MapHere child_map = ChildMap(map, depth, code, child, &next);
     const std::array<int, 3> k = {key_min[0] + cx * half, key_min[1] + cy * half,
                                   key_min[2] + cz * half};
+    const std::uint64_t child_code = code + static_cast<std::uint64_t>(child) * span;
     // Where the map holds the child free at the clamp, it emits nothing but voxels a ray crossed
     // with occupied evidence: under a parent free through every beam it is free, free through
     // or unknown, and a voxel without such evidence is free at most (VisitVoxel). Its geometry
     // is then not needed.
     const bool saturated = Saturated(child_map);
-    if (saturated && (free_through || !HoldsTracedOccupied(k, child_depth))) {
+    if (saturated && (free_through || !HoldsTracedOccupied(child_code, child_depth))) {
       ++stats_->skipped_saturated;
       continue;
     }
@@ -279,13 +284,13 @@ inline void Descent::VisitChildren(unsigned depth, const std::array<int, 3>& key
 #endif
     if (v.kind == Kind::kUnknown) continue;
     if (v.kind == Kind::kFree) {
-      Emit(child_depth, k, v.free_value);
+      Emit(child_depth, child_code, v.free_value);
     } else if (child_depth == kTreeDepth) {
-      VisitVoxel(k, box, v, saturated);
+      VisitVoxel(k, child_code, box, v, saturated);
     } else if (child_depth == kShareDepth && tasks_ != nullptr) {
-      LeaveTask({child_depth, k, v.beams, v.free_through, child_map, out_->size()});
+      LeaveTask({child_depth, k, child_code, v.beams, v.free_through, child_map, out_->size()});
     } else {
-      VisitChildren(child_depth, k, v.beams, v.free_through, child_map);
+      VisitChildren(child_depth, k, child_code, v.beams, v.free_through, child_map);
     }
   }
 }
@@ -303,8 +308,8 @@ inline Descent::MapHere Descent::RootMap() const {
   return m;
 }
 
-inline Descent::MapHere Descent::ChildMap(const MapHere& map, unsigned depth,
-                                          const std::array<int, 3>& key_min, int child,
+inline Descent::MapHere Descent::ChildMap(const MapHere& map, unsigned depth, std::uint64_t code,
+                                          int child,
                                           std::array<const MapNode*, kMaxOthers>* next) const {
   MapHere c;
   if (skip_ == nullptr) return c;
@@ -318,10 +323,7 @@ inline Descent::MapHere Descent::ChildMap(const MapHere& map, unsigned depth,
   }
   c.others_cover = map.others_cover;
   if (c.others_cover || skip_->others.empty()) return c;
-  const octomap::OcTreeKey k(static_cast<octomap::key_type>(key_min[0]),
-                             static_cast<octomap::key_type>(key_min[1]),
-                             static_cast<octomap::key_type>(key_min[2]));
-  const std::uint64_t end = MortonOf(k) + (child + 1) * MortonSpan(depth + 1);
+  const std::uint64_t end = code + (child + 1) * MortonSpan(depth + 1);
   for (std::size_t i = 0; i < skip_->others.size(); ++i) {
     const MapNode* lo = (*next)[i];
     const MapNode* hi =
@@ -349,10 +351,7 @@ inline bool Descent::Saturated(const MapHere& m) const {
   return true;
 }
 
-inline bool Descent::HoldsTracedOccupied(const std::array<int, 3>& key_min, unsigned depth) const {
-  const std::uint64_t code = MortonOf(octomap::OcTreeKey(
-      static_cast<octomap::key_type>(key_min[0]), static_cast<octomap::key_type>(key_min[1]),
-      static_cast<octomap::key_type>(key_min[2])));
+inline bool Descent::HoldsTracedOccupied(std::uint64_t code, unsigned depth) const {
   const auto it = std::lower_bound(occupied_codes_.begin(), occupied_codes_.end(), code);
   return it != occupied_codes_.end() && *it < code + MortonSpan(depth);
 }
@@ -406,8 +405,8 @@ inline Descent::TanBounds Descent::Bounds(double inset) const {
   return v;
 }
 
-inline void Descent::VisitVoxel(const std::array<int, 3>& key_min, const Box& box, const Verdict& v,
-                                bool saturated) {
+inline void Descent::VisitVoxel(const std::array<int, 3>& key_min, std::uint64_t code,
+                                const Box& box, const Verdict& v, bool saturated) {
   const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
                                static_cast<octomap::key_type>(key_min[1]),
                                static_cast<octomap::key_type>(key_min[2]));
@@ -417,7 +416,7 @@ inline void Descent::VisitVoxel(const std::array<int, 3>& key_min, const Box& bo
     if (saturated && *traced <= 0.0) {
       ++stats_->skipped_saturated;
     } else {
-      Emit(kTreeDepth, key_min, static_cast<float>(*traced));
+      Emit(kTreeDepth, code, static_cast<float>(*traced));
     }
     return;
   }
@@ -442,7 +441,7 @@ inline void Descent::VisitVoxel(const std::array<int, 3>& key_min, const Box& bo
     reach = CentreLinesThrough(box, c0, c1 + 1, r0, r1 + 1);
   }
   if (reach.touched != 0 && box.r_lo2 < Square(reach.max_free_end)) {
-    Emit(kTreeDepth, key_min, reach.max_free_value);
+    Emit(kTreeDepth, code, reach.max_free_value);
   }
 }
 
@@ -492,11 +491,8 @@ inline const Eigen::Vector3f& Descent::WorldDirection(std::size_t beam) {
   return dirs_->directions[beam];
 }
 
-inline void Descent::Emit(unsigned depth, const std::array<int, 3>& key_min, float value) {
-  const octomap::OcTreeKey key(static_cast<octomap::key_type>(key_min[0]),
-                               static_cast<octomap::key_type>(key_min[1]),
-                               static_cast<octomap::key_type>(key_min[2]));
-  out_->Append({MortonOf(key), value, static_cast<std::uint8_t>(depth)});
+inline void Descent::Emit(unsigned depth, std::uint64_t code, float value) {
+  out_->Append({code, value, static_cast<std::uint8_t>(depth)});
   if (depth == kTreeDepth) {
     ++stats_->fine_voxels;
   } else {
