@@ -122,7 +122,7 @@ class Descent {
   // The history holds the whole block at or below the free clamp, and no other live
   // contribution says anything there.
   [[nodiscard]] bool Saturated(const MapHere& m) const;
-  // A ray crossed a voxel of the block (its first key, its depth) in a beam's first-hit mass
+  // A ray crossed a voxel of the block (its Morton code, its depth) in a beam's first-hit mass
   // with occupied evidence.
   [[nodiscard]] bool HoldsTracedOccupied(std::uint64_t code, unsigned depth) const;
   [[nodiscard]] TanBounds Bounds(double inset) const;
